@@ -1,0 +1,219 @@
+"""Machinery shared by the paper plants: actions, noise, parameters, the model.
+
+Each plant subclasses :class:`PlantEnv` and supplies its transition, its
+measurement function, its reward, its physical domain and a drawing. The base
+class does what must be identical everywhere:
+
+* **Actions.** The action space is ``Box(-1, 1, (n_u,), float32)``; the plant
+  scales it to physical units. A NaN/inf or wrongly shaped action raises
+  ``ValueError`` naming the action. An out-of-bounds action is *clipped* to
+  ``[-1, 1]`` (what stable-baselines3 does before calling ``step``) and
+  ``info["action_clipped"]`` says so. A size-1 action may be a scalar.
+* **Randomness.** Every draw (initial state, process and measurement noise)
+  comes from ``self.np_random``, seeded by ``reset(seed=...)`` as Gymnasium
+  prescribes.
+* **True versus nominal parameters.** The constructor's physical parameters
+  are the truth; ``nominal={"name": value, ...}`` lists the values the filter's
+  :attr:`model` believes instead (keys must be parameter names). The
+  parameters actually used are in :attr:`params` and :attr:`nominal_params`.
+* **Observation and info.** The observation is the noisy measurement ``y[k]``
+  in float64 (filters consume it at full precision); its bounds are ±inf
+  because the measurement noise is Gaussian, so Gymnasium's checker warns that
+  they are "probably too low/high" — the warning is expected.
+  ``info["state"]`` is a fresh copy of the true state ``x[k]``.
+* **Reset options.** ``reset(options={"state": x0})`` starts from a given state.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._validation import as_covariance, as_vector
+
+FloatArray = NDArray[np.float64]
+
+
+class PlantEnv(gym.Env[FloatArray, FloatArray]):
+    """Base class of the paper plants; see the module docstring for the shared rules."""
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    #: names of the state components, in order (set by each plant)
+    state_names: ClassVar[tuple[str, ...]] = ()
+    #: names of the measurement components
+    measurement_names: ClassVar[tuple[str, ...]] = ()
+    #: physical meaning and unit of the single action component (documentation)
+    action_names: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(
+        self,
+        *,
+        params: Mapping[str, Any],
+        nominal: Mapping[str, Any] | None,
+        default_nominal: Mapping[str, Any] | None,
+        initial_state: ArrayLike,
+        initial_state_cov: ArrayLike | None,
+        render_mode: str | None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}; "
+                f"got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.params: dict[str, Any] = dict(params)
+        overrides = dict(default_nominal or {})
+        if nominal is not None:
+            if not isinstance(nominal, Mapping):
+                raise TypeError(f"nominal must be a mapping of parameter names to values; "
+                                f"got {type(nominal).__name__}")
+            unknown = sorted(set(nominal) - set(self.params))
+            if unknown:
+                raise ValueError(f"nominal has unknown parameter(s) {unknown}; "
+                                 f"known parameters are {sorted(self.params)}")
+            overrides.update(nominal)
+        self.nominal_params: dict[str, Any] = {**self.params, **overrides}
+        n_x = len(self.state_names)
+        self.initial_state = as_vector("initial_state", initial_state, n_x)
+        self.initial_state_cov = (np.zeros((n_x, n_x)) if initial_state_cov is None
+                                  else as_covariance("initial_state_cov", initial_state_cov, n_x))
+        self._initial_sqrt = psd_sqrt(self.initial_state_cov)
+        self._measurement_sqrt = psd_sqrt(np.atleast_2d(self.params["R"]))
+
+        n_u = len(self.action_names)
+        # float32 actions (what stable-baselines3 produces); the plant computes in float64.
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n_u,), dtype=np.float32)
+        n_y = len(self.measurement_names)
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n_y,), dtype=np.float64)
+        self.state: FloatArray = self.initial_state.copy()
+        self.time_step = 0
+        self._last_obs = np.zeros(n_y)
+        self._model: StateSpaceModel | None = None
+
+    # ------------------------------------------------------------------ to implement
+    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
+        """True next state from state ``x`` and normalised action ``a`` (draws noise)."""
+        raise NotImplementedError
+
+    def _measure(self, x: FloatArray) -> FloatArray:
+        """Noisy measurement of the state reached at the current step."""
+        return self._noise_free_measurement(x) + self._measurement_sqrt @ self.np_random.standard_normal(
+            self._measurement_sqrt.shape[1])
+
+    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+        raise NotImplementedError
+
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+        raise NotImplementedError
+
+    def _in_domain(self, x: FloatArray) -> bool:
+        """Whether ``x`` is inside the plant's physical domain (else the episode terminates)."""
+        return bool(np.all(np.isfinite(x)))
+
+    def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
+        raise NotImplementedError
+
+    def _draw(self, canvas: Any) -> None:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ model
+    @property
+    def model(self) -> StateSpaceModel:
+        """The filter's belief about this plant, built from :attr:`nominal_params`."""
+        if self._model is None:
+            self._model = self._build_model(self.nominal_params)
+        return self._model
+
+    def make_model(self, **overrides: Any) -> StateSpaceModel:
+        """A model built from the nominal parameters with some replaced.
+
+        ``env.make_model(**env.params)`` is the model that matches the truth.
+        """
+        unknown = sorted(set(overrides) - set(self.params))
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown}; known parameters are "
+                             f"{sorted(self.params)}")
+        return self._build_model({**self.nominal_params, **overrides})
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[FloatArray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        unknown = sorted(set(options) - {"state"})
+        if unknown:
+            raise ValueError(f"reset options {unknown} are not understood; known: ['state']")
+        if "state" in options:
+            self.state = as_vector("options['state']", options["state"], len(self.state_names))
+        else:
+            noise = self.np_random.standard_normal(self._initial_sqrt.shape[1])
+            self.state = self.initial_state + self._initial_sqrt @ noise
+        self.time_step = 0
+        self._last_obs = self._measure(self.state)
+        return self._last_obs.copy(), {"state": self.state.copy()}
+
+    def step(
+        self, action: ArrayLike
+    ) -> tuple[FloatArray, SupportsFloat, bool, bool, dict[str, Any]]:
+        a, clipped = self._check_action(action)
+        x = self.state
+        x_next = self._transition(x, a)
+        self.time_step += 1
+        terminated = not self._in_domain(x_next)
+        reward = self._reward(x, a, x_next)
+        self.state = x_next
+        info: dict[str, Any] = {"state": x_next.copy(), "action_clipped": clipped}
+        if np.all(np.isfinite(x_next)):
+            obs = self._measure(x_next)
+        else:
+            # A plant whose domain check is right never gets here; if parameters push
+            # the state to overflow in one step, end the episode without handing NaN
+            # to the controller: repeat the last observation and say why.
+            obs, reward = self._last_obs.copy(), 0.0
+            info["nonfinite_state"] = True
+        self._last_obs = obs
+        return obs, float(reward), terminated, False, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' to "
+                f"gym.make('{self.spec.id if self.spec else type(self).__name__}')."
+            )
+            return None
+        from ._draw import Canvas
+
+        canvas = Canvas(400, 300)
+        self._draw(canvas)
+        return canvas.image
+
+    # ------------------------------------------------------------------ helpers
+    def _check_action(self, action: ArrayLike) -> tuple[FloatArray, bool]:
+        shape = self.action_space.shape
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"action must be numeric of shape {shape}; got {action!r}") from None
+        if a.shape != shape:
+            if a.size == 1 and shape == (1,) and a.ndim <= 1:
+                a = a.reshape(1)
+            else:
+                raise ValueError(f"action must have shape {shape}; got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite; got {a}")
+        clipped = np.clip(a, -1.0, 1.0)
+        return clipped, bool(np.any(clipped != a))
+
+
+def psd_sqrt(M: FloatArray) -> FloatArray:
+    """A square root ``L`` with ``L Lᵀ = M`` for a symmetric PSD (possibly singular) ``M``."""
+    w, V = np.linalg.eigh(M)
+    return V * np.sqrt(np.clip(w, 0.0, None))

@@ -1,0 +1,207 @@
+"""Rectilinear orbit determination: paper 000, simulation 1 (after Jazwinski 1968)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._validation import FloatArray, as_covariance, positive
+
+from . import _draw
+from ._base import PlantEnv, psd_sqrt
+
+TRUE_MU = 19.92244165
+NOMINAL_MU = 19.91
+
+
+class OrbitDynamics:
+    """Euler-discretised radial motion under gravity and radial thrust, one measurement interval.
+
+    Paper 000, eq (27): ``x[j+1] = x[j] + [x2; -μ/x1² + a] Δ`` with ``Δ = euler_dt``,
+    repeated ``substeps`` (M = 100) times per measurement interval; ``a`` is the
+    thrust acceleration, held over the interval. The Jacobian of the interval map is
+    the product of the Euler Jacobians ``I + Δ [[0, 1], [2μ/x1³, 0]]`` along the path.
+    Batched over a leading axis; picklable (the model's callables are its methods).
+    """
+
+    def __init__(self, mu: float, euler_dt: float, substeps: int, thrust_max: float) -> None:
+        self.mu, self.euler_dt, self.substeps, self.thrust_max = mu, euler_dt, substeps, thrust_max
+
+    def propagate(self, x: FloatArray, u: FloatArray, jacobian: bool = False
+                  ) -> tuple[FloatArray, FloatArray | None]:
+        r, v = x[..., 0].copy(), x[..., 1].copy()
+        a = u[..., 0] * self.thrust_max
+        d, mu = self.euler_dt, self.mu
+        if jacobian:
+            J = np.zeros(x.shape[:-1] + (2, 2))
+            J[..., 0, 0] = J[..., 1, 1] = 1.0
+        for _ in range(self.substeps):
+            if jacobian:
+                g = 2.0 * mu / r**3 * d            # ∂(-μ/r²)/∂r · Δ
+                # J ← (I + Δ [[0, 1], [2μ/r³, 0]]) J, row by row
+                J0 = J[..., 0, :] + d * J[..., 1, :]
+                J[..., 1, :] = J[..., 1, :] + g[..., None] * J[..., 0, :]
+                J[..., 0, :] = J0
+            r, v = r + v * d, v + (a - mu / (r * r)) * d
+        return np.stack([r, v], axis=-1), (J if jacobian else None)
+
+    def f(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        return self.propagate(x, u)[0]
+
+    def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        return self.propagate(x, u, jacobian=True)[1]
+
+    @staticmethod
+    def h(x: FloatArray) -> FloatArray:
+        return x[..., :1].copy()
+
+    @staticmethod
+    def H(x: FloatArray) -> FloatArray:
+        return np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)).copy()
+
+
+class OrbitEnv(PlantEnv):
+    """
+    ## Description
+
+    A body moves along a straight line through the centre of a planet (rectilinear
+    orbit, Jazwinski 1968). Paper 000 (Han, Kwon & Han, "An Extended FIR Filter for
+    Discrete-time Nonlinear Systems", simulation 1) uses it to show an extended
+    Kalman filter diverging under a wrong gravitational parameter while the
+    extended FIR filter stays bounded. The plant is the paper's Euler
+    discretisation, eq (27), with a radial thrust added:
+
+        r[j+1] = r[j] + v[j] Δ
+        v[j+1] = v[j] + (-μ / r[j]² + a) Δ,       Δ = 1e-4
+
+    and the range is measured every M = 100 Euler steps, eq (28):
+    ``y[k] = r + v[k]``, ``v[k] ~ N(0, R)``, R = 1e-3. One env step is one
+    measurement interval (0.01 time units). The true μ = 19.92244165; the
+    filter's :attr:`model` believes μ = 19.91 unless ``nominal`` says otherwise.
+    Process noise is off by default, as in the paper; when ``Q`` is given, a
+    ``N(0, Q)`` draw is added to the state once per measurement interval, so the
+    model ``x[k+1] = f(x[k], u[k]) + w[k]`` is exactly the plant's law.
+
+    ## Action Space
+
+    | Num | Action                                  | Min | Max |
+    |-----|-----------------------------------------|-----|-----|
+    | 0   | radial thrust, in units of `thrust_max` | -1  | 1   |
+
+    The thrust acceleration ``a = action * thrust_max`` is held over the interval.
+    Actions outside ``[-1, 1]`` are clipped (``info["action_clipped"]``).
+
+    ## Observation Space
+
+    | Num | Observation                 | Min  | Max |
+    |-----|-----------------------------|------|-----|
+    | 0   | measured radius r + v       | -Inf | Inf |
+
+    ## State (``info["state"]``)
+
+    ``[r, v]``: radius and radial velocity.
+
+    ## Rewards
+
+    Hold the reference radius: ``-(r[k+1] - r_ref)² - 0.01 action²``.
+
+    ## Starting State
+
+    ``[7.99, 1.99]`` (the paper's), plus a draw from ``N(0, initial_state_cov)``
+    (zero by default, so only the measurement noise depends on the seed).
+
+    ## Episode End
+
+    Termination when ``r <= r_min`` (the body reaches the planet, 1.0) or
+    ``r >= r_max`` (100.0). Truncation at 1000 steps (10 time units) by the
+    registered ``TimeLimit``.
+
+    ## Arguments
+
+    ``gym.make("fir_gym/Orbit-v0", mu=19.92244165, R=1e-3, Q=None, euler_dt=1e-4,
+    substeps=100, thrust_max=1.0, r_ref=8.0, nominal={"mu": 19.91},
+    initial_state=(7.99, 1.99), initial_state_cov=None, render_mode=None)``.
+    ``nominal`` lists parameters the model believes differently from the truth
+    (keys: ``mu, R, Q, euler_dt, substeps, thrust_max``).
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    state_names: ClassVar[tuple[str, ...]] = ("r", "v")
+    measurement_names: ClassVar[tuple[str, ...]] = ("r_measured",)
+    action_names: ClassVar[tuple[str, ...]] = ("thrust",)
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(
+        self,
+        *,
+        mu: float = TRUE_MU,
+        R: float = 1e-3,
+        Q: ArrayLike | None = None,
+        euler_dt: float = 1e-4,
+        substeps: int = 100,
+        thrust_max: float = 1.0,
+        r_ref: float = 8.0,
+        r_min: float = 1.0,
+        r_max: float = 100.0,
+        nominal: Mapping[str, Any] | None = None,
+        initial_state: ArrayLike = (7.99, 1.99),
+        initial_state_cov: ArrayLike | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        params = {
+            "mu": positive("mu", mu),
+            "R": as_covariance("R", R, 1, definite=True),
+            "Q": np.zeros((2, 2)) if Q is None else as_covariance("Q", Q, 2),
+            "euler_dt": positive("euler_dt", euler_dt),
+            "substeps": positive("substeps", substeps, integer=True),
+            "thrust_max": positive("thrust_max", thrust_max),
+        }
+        self.r_ref = positive("r_ref", r_ref)
+        self.r_min, self.r_max = positive("r_min", r_min), positive("r_max", r_max)
+        if not self.r_min < self.r_ref < self.r_max:
+            raise ValueError(f"need r_min < r_ref < r_max; got {r_min}, {r_ref}, {r_max}")
+        super().__init__(params=params, nominal=nominal, default_nominal={"mu": NOMINAL_MU},
+                         initial_state=initial_state, initial_state_cov=initial_state_cov,
+                         render_mode=render_mode)
+        self._dynamics = OrbitDynamics(self.params["mu"], self.params["euler_dt"],
+                                       self.params["substeps"], self.params["thrust_max"])
+        self._process_sqrt = psd_sqrt(self.params["Q"])
+
+    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
+        x_next = self._dynamics.f(x, a)
+        if np.any(self.params["Q"]):
+            x_next = x_next + self._process_sqrt @ self.np_random.standard_normal(2)
+        return x_next
+
+    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+        return OrbitDynamics.h(x)
+
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+        return -float((x_next[0] - self.r_ref) ** 2) - 0.01 * float(a[0] ** 2)
+
+    def _in_domain(self, x: FloatArray) -> bool:
+        return bool(np.all(np.isfinite(x)) and self.r_min < x[0] < self.r_max)
+
+    def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
+        dyn = OrbitDynamics(positive("nominal mu", params["mu"]), params["euler_dt"],
+                            params["substeps"], params["thrust_max"])
+        dt = params["euler_dt"] * params["substeps"]
+        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, Q=params["Q"], R=params["R"],
+                               dt=dt, n_u=1, name=f"Orbit(mu={params['mu']:g})")
+
+    def _draw(self, canvas: _draw.Canvas) -> None:
+        r = float(self.state[0])
+        extent = max(12.0, 1.15 * max(r, self.r_ref))
+        canvas.set_view((-extent * 4 / 3, extent * 4 / 3), (-extent, extent))
+        canvas.ring(0.0, 0.0, self.r_ref, _draw.GREY, width=1.5)
+        canvas.circle(0.0, 0.0, self.r_min, _draw.BLUE)
+        canvas.line(0.0, 0.0, 0.0, r, _draw.GREY, width=1.0)
+        canvas.circle(0.0, r, 0.02 * extent + 0.1, _draw.ACCENT)
+

@@ -1,0 +1,120 @@
+"""Argument checks shared by models and filters.
+
+Every public constructor, ``reset`` and ``step`` in this package validates its
+inputs here, so a bad argument fails at the boundary with a message that names
+the argument and says what was expected (ARCHITECTURE.md, "Names and style").
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Relative tolerance for symmetry and for the smallest admissible eigenvalue.
+SYMMETRY_RTOL = 1e-9
+
+
+def as_matrix(name: str, value: ArrayLike, shape: tuple[int | None, int | None]) -> FloatArray:
+    """Return ``value`` as a finite float64 2-D array of the given shape.
+
+    ``None`` in ``shape`` accepts any size on that axis. A scalar is accepted
+    for a 1x1 matrix.
+    """
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0 and shape in ((1, 1), (None, None), (1, None), (None, 1)):
+        arr = arr.reshape(1, 1)
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D matrix of shape {_fmt(shape)}; got shape {arr.shape}")
+    for axis, want in enumerate(shape):
+        if want is not None and arr.shape[axis] != want:
+            raise ValueError(f"{name} must have shape {_fmt(shape)}; got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; it contains NaN or inf")
+    return arr
+
+
+def as_covariance(
+    name: str,
+    value: ArrayLike,
+    size: int | None = None,
+    *,
+    definite: bool = False,
+) -> FloatArray:
+    """Return ``value`` as a symmetric positive semi-definite matrix.
+
+    A scalar is a 1x1 covariance; a 1-D array is read as a diagonal. The
+    matrix must be symmetric to a relative ``SYMMETRY_RTOL`` (it is then
+    symmetrised exactly) and its smallest eigenvalue must not be below
+    ``-SYMMETRY_RTOL * max|eig|`` (or must be positive when ``definite``).
+    """
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    elif arr.ndim == 1:
+        arr = np.diag(arr)
+    want = (size, size)
+    arr = as_matrix(name, arr, want)
+    if arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"{name} must be square; got shape {arr.shape}")
+    scale = max(float(np.max(np.abs(arr))), np.finfo(float).tiny)
+    if np.max(np.abs(arr - arr.T)) > SYMMETRY_RTOL * scale:
+        raise ValueError(f"{name} must be symmetric; max |{name} - {name}ᵀ| = "
+                         f"{np.max(np.abs(arr - arr.T)):.3g}")
+    arr = 0.5 * (arr + arr.T)
+    eig = np.linalg.eigvalsh(arr)
+    if definite and eig[0] <= SYMMETRY_RTOL * scale:
+        raise ValueError(f"{name} must be positive definite; smallest eigenvalue is {eig[0]:.3g}")
+    if eig[0] < -SYMMETRY_RTOL * scale:
+        raise ValueError(
+            f"{name} must be positive semi-definite; smallest eigenvalue is {eig[0]:.3g}"
+        )
+    return arr
+
+
+def as_vector(name: str, value: ArrayLike, size: int) -> FloatArray:
+    """Return ``value`` as a finite float64 vector of length ``size``."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0 and size == 1:
+        arr = arr.reshape(1)
+    if arr.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got {arr}")
+    return arr
+
+
+def as_batch(name: str, value: ArrayLike, size: int) -> FloatArray:
+    """Return ``value`` as float64 of shape ``(size,)`` or ``(B, size)``.
+
+    Finiteness is not checked here: filters decide what a non-finite
+    measurement means (see their ``nan_policy``).
+    """
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0 and size == 1:
+        arr = arr.reshape(1)
+    if arr.ndim not in (1, 2) or arr.shape[-1] != size:
+        raise ValueError(f"{name} must have shape ({size},) or (B, {size}); got shape {arr.shape}")
+    return arr
+
+
+def positive(name: str, value: Any, *, integer: bool = False) -> Any:
+    """Check that ``value`` is a finite positive number (an int if ``integer``)."""
+    if integer:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+            raise ValueError(f"{name} must be a positive integer; got {value!r}")
+        return int(value)
+    try:
+        val = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number; got {value!r}") from None
+    if not np.isfinite(val) or val <= 0:
+        raise ValueError(f"{name} must be a positive finite number; got {value!r}")
+    return val
+
+
+def _fmt(shape: tuple[int | None, ...]) -> str:
+    return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"

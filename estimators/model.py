@@ -1,0 +1,394 @@
+"""The model contract: what a filter may know about a plant.
+
+A :class:`StateSpaceModel` is the discrete-time stochastic system
+
+    x[k+1] = f(x[k], u[k]) + G w[k],      w[k] ~ N(0, Q)
+    y[k]   = h(x[k]) + v[k],              v[k] ~ N(0, R)
+
+with sample period ``dt`` (ARCHITECTURE.md, "The two contracts"). Every
+callable accepts a leading batch axis: ``x`` of shape ``(n_x,)`` or
+``(B, n_x)``, ``u`` of shape ``(n_u,)`` or ``(B, n_u)``; the result has the
+same leading shape. :class:`LinearModel` is the special case
+``f = A x + B u``, ``h = C x``.
+
+A plant's model is the filter's *belief*: it is built from nominal parameters
+that may differ from the plant's true ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import FloatArray, as_covariance, as_matrix, positive
+
+Dynamics = Callable[[FloatArray, FloatArray], FloatArray]
+Output = Callable[[FloatArray], FloatArray]
+
+#: Relative step of the central finite differences, ``eps**(1/3)``: it balances
+#: truncation error O(h²) against round-off O(eps/h) for a smooth function.
+FD_RELATIVE_STEP = float(np.finfo(np.float64).eps ** (1.0 / 3.0))
+
+
+class StateSpaceModel:
+    """Discrete-time nonlinear state-space model ``x⁺ = f(x, u) + G w``, ``y = h(x) + v``.
+
+    Args:
+        f: transition ``f(x, u) -> x⁺``, batched over a leading axis. It always
+            receives ``u`` as an array of shape ``(..., n_u)`` (zeros when the
+            caller passes ``None``; an empty last axis when ``n_u == 0``).
+        h: measurement function ``h(x) -> y``, batched.
+        Q: covariance of the process noise ``w`` (``n_w x n_w``; a scalar or a
+            1-D array of variances is accepted). Symmetric positive semi-definite.
+        R: covariance of the measurement noise ``v`` (``n_y x n_y``); symmetric
+            positive semi-definite.
+        dt: sample period in seconds (metadata for filters and reports).
+        F: Jacobian ``∂f/∂x (x, u)``, shape ``(..., n_x, n_x)``. When omitted,
+            central finite differences are used (see :meth:`F`).
+        H: Jacobian ``∂h/∂x (x)``, shape ``(..., n_y, n_x)``; same fallback.
+        G: noise input matrix ``(n_x, n_w)``; defaults to the identity, in which
+            case ``n_w = n_x``.
+        n_u: number of inputs.
+        name: a label used in ``repr`` and reports.
+
+    ``n_x`` is inferred from ``G`` (its rows) or from ``Q`` when ``G`` is absent;
+    ``n_y`` from ``R``. The state noise covariance is ``G Q Gᵀ``
+    (:attr:`GQGT`).
+    """
+
+    is_linear: bool = False
+
+    def __init__(
+        self,
+        *,
+        f: Dynamics,
+        h: Output,
+        Q: ArrayLike,
+        R: ArrayLike,
+        dt: float = 1.0,
+        F: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
+        H: Callable[[FloatArray], FloatArray] | None = None,
+        G: ArrayLike | None = None,
+        n_u: int = 0,
+        name: str | None = None,
+    ) -> None:
+        for arg, fn in (("f", f), ("h", h)):
+            if not callable(fn):
+                raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
+        for arg, fn in (("F", F), ("H", H)):
+            if fn is not None and not callable(fn):
+                raise TypeError(f"{arg} must be callable or None; got {type(fn).__name__}")
+        self.Q = _readonly(as_covariance("Q", Q))
+        n_w = self.Q.shape[0]
+        if G is None:
+            self.G = _readonly(np.eye(n_w))
+        else:
+            self.G = _readonly(as_matrix("G", G, (None, n_w)))
+        self.R = _readonly(as_covariance("R", R))
+        self.n_x = int(self.G.shape[0])
+        self.n_w = int(n_w)
+        self.n_y = int(self.R.shape[0])
+        if isinstance(n_u, bool) or not isinstance(n_u, (int, np.integer)) or n_u < 0:
+            raise ValueError(f"n_u must be a non-negative integer; got {n_u!r}")
+        self.n_u = int(n_u)
+        self.dt = positive("dt", dt)
+        self.name = name or type(self).__name__
+        self._f = f
+        self._h = h
+        self._F = F
+        self._H = H
+        self._GQGT = _readonly(self.G @ self.Q @ self.G.T)
+
+    # ------------------------------------------------------------------ callables
+    def f(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        """Transition ``f(x, u)`` for ``x`` of shape ``(n_x,)`` or ``(B, n_x)``."""
+        x = self._check_x(x)
+        return self._f(x, self._input(u, x))
+
+    def h(self, x: ArrayLike) -> FloatArray:
+        """Measurement function ``h(x)``, shape ``(n_y,)`` or ``(B, n_y)``."""
+        return self._h(self._check_x(x))
+
+    def F(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        """Jacobian ``∂f/∂x``, shape ``(n_x, n_x)`` or ``(B, n_x, n_x)``.
+
+        Analytic when the model was given ``F``; otherwise central finite
+        differences ``(f(x + e_j s_j) - f(x - e_j s_j)) / (2 s_j)`` with
+        ``s_j = eps**(1/3) * max(1, |x_j|)``, evaluated in one batched call
+        of ``f`` (error O(s²) for smooth ``f``, about 1e-10 relative).
+        """
+        x = self._check_x(x)
+        u = self._input(u, x)
+        if self._F is not None:
+            return self._F(x, u)
+        return _central_jacobian(lambda z, uu: self._f(z, uu), x, u)
+
+    def H(self, x: ArrayLike) -> FloatArray:
+        """Jacobian ``∂h/∂x``, shape ``(n_y, n_x)`` or ``(B, n_y, n_x)``.
+
+        Analytic when given, else the same central differences as :meth:`F`.
+        """
+        x = self._check_x(x)
+        if self._H is not None:
+            return self._H(x)
+        return _central_jacobian(lambda z, _u: self._h(z), x, None)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def GQGT(self) -> FloatArray:
+        """State noise covariance ``G Q Gᵀ`` (``n_x x n_x``, read-only)."""
+        return self._GQGT
+
+    @property
+    def has_analytic_jacobians(self) -> tuple[bool, bool]:
+        """Whether ``F`` and ``H`` are analytic (True) or finite differences."""
+        return self._F is not None, self._H is not None
+
+    def replace(self, **changes: Any) -> StateSpaceModel:
+        """A copy with some constructor arguments replaced (e.g. ``Q=...``)."""
+        kwargs = self._constructor_kwargs()
+        unknown = set(changes) - set(kwargs)
+        if unknown:
+            raise ValueError(
+                f"unknown argument(s) {sorted(unknown)} for {type(self).__name__}.replace; "
+                f"expected some of {sorted(kwargs)}"
+            )
+        kwargs.update(changes)
+        return type(self)(**kwargs)
+
+    def _constructor_kwargs(self) -> dict[str, Any]:
+        return {"f": self._f, "h": self._h, "Q": self.Q, "R": self.R, "dt": self.dt,
+                "F": self._F, "H": self._H, "G": self.G, "n_u": self.n_u, "name": self.name}
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(name={self.name!r}, n_x={self.n_x}, n_y={self.n_y}, "
+                f"n_u={self.n_u}, n_w={self.n_w}, dt={self.dt:g})")
+
+    # ------------------------------------------------------------------ helpers
+    def _check_x(self, x: ArrayLike) -> FloatArray:
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim not in (1, 2) or x.shape[-1] != self.n_x:
+            raise ValueError(
+                f"x must have shape ({self.n_x},) or (B, {self.n_x}); got shape {x.shape}"
+            )
+        return x
+
+    def _input(self, u: ArrayLike | None, x: FloatArray) -> FloatArray:
+        if u is None:
+            return np.zeros(x.shape[:-1] + (self.n_u,))
+        u = np.asarray(u, dtype=np.float64)
+        if u.ndim == 0 and self.n_u == 1:
+            u = u.reshape(1)
+        if u.ndim not in (1, 2) or u.shape[-1] != self.n_u:
+            raise ValueError(
+                f"u must have shape ({self.n_u},) or (B, {self.n_u}); got shape {u.shape}"
+            )
+        return u
+
+
+class SystemMatrices(NamedTuple):
+    """Matrices of ``x[k+1] = A x[k] + B u[k] + G w[k]``, ``y[k] = C x[k] + v[k]`` at one ``k``."""
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    G: FloatArray
+    Q: FloatArray
+    R: FloatArray
+
+
+class LinearModel(StateSpaceModel):
+    """Linear time-invariant model ``x⁺ = A x + B u + G w``, ``y = C x + v``.
+
+    Args:
+        A: state matrix ``(n_x, n_x)``.
+        C: output matrix ``(n_y, n_x)``.
+        Q: covariance of ``w`` (``n_w x n_w``).
+        R: covariance of ``v`` (``n_y x n_y``).
+        B: input matrix ``(n_x, n_u)``; absent means no input (``n_u = 0``).
+        G: noise input matrix ``(n_x, n_w)``; defaults to the identity.
+        dt: sample period.
+
+    ``A``, ``B``, ``C`` are exposed read-only; ``F`` and ``H`` return ``A`` and
+    ``C`` (broadcast, read-only, over a batch).
+    """
+
+    is_linear = True
+
+    def __init__(
+        self,
+        *,
+        A: ArrayLike,
+        C: ArrayLike,
+        Q: ArrayLike,
+        R: ArrayLike,
+        B: ArrayLike | None = None,
+        G: ArrayLike | None = None,
+        dt: float = 1.0,
+        name: str | None = None,
+    ) -> None:
+        A_ = as_matrix("A", A, (None, None))
+        if A_.shape[0] != A_.shape[1]:
+            raise ValueError(f"A must be square; got shape {A_.shape}")
+        n_x = A_.shape[0]
+        C_ = as_matrix("C", C if np.ndim(C) != 1 else np.atleast_2d(C), (None, n_x))
+        B_ = np.zeros((n_x, 0)) if B is None else as_matrix(
+            "B", B if np.ndim(B) != 1 else np.reshape(B, (n_x, -1)), (n_x, None))
+        Q_ = as_covariance("Q", Q)
+        if G is None and Q_.shape[0] != n_x:
+            raise ValueError(f"Q must be {n_x}x{n_x} when G is absent (G = I); got {Q_.shape}")
+        R_ = as_covariance("R", R)
+        if R_.shape[0] != C_.shape[0]:
+            raise ValueError(f"R must be {C_.shape[0]}x{C_.shape[0]} to match C; got {R_.shape}")
+        self.A = _readonly(A_)
+        self.B = _readonly(B_)
+        self.C = _readonly(C_)
+        super().__init__(f=self._linear_f, h=self._linear_h, Q=Q_, R=R_, dt=dt,
+                         F=self._linear_F, H=self._linear_H, G=G, n_u=B_.shape[1], name=name)
+        if self.n_x != n_x:
+            raise ValueError(f"G must have {n_x} rows to match A; got shape {self.G.shape}")
+
+    time_invariant = True
+
+    def matrices(self, k: int = 0) -> SystemMatrices:
+        """The system matrices at time ``k`` (constant for this model)."""
+        return SystemMatrices(self.A, self.B, self.C, self.G, self.Q, self.R)
+
+    def _linear_f(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        out = x @ self.A.T
+        if self.n_u:
+            out = out + u @ self.B.T
+        return out
+
+    def _linear_h(self, x: FloatArray) -> FloatArray:
+        return x @ self.C.T
+
+    def _linear_F(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        return self.A if x.ndim == 1 else np.broadcast_to(self.A, x.shape[:-1] + self.A.shape)
+
+    def _linear_H(self, x: FloatArray) -> FloatArray:
+        return self.C if x.ndim == 1 else np.broadcast_to(self.C, x.shape[:-1] + self.C.shape)
+
+    def _constructor_kwargs(self) -> dict[str, Any]:
+        return {"A": self.A, "C": self.C, "Q": self.Q, "R": self.R, "B": self.B if self.n_u else None,
+                "G": self.G, "dt": self.dt, "name": self.name}
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Bound methods of self are stored as callables; rebuild from matrices instead.
+        return (_rebuild_linear, (self._constructor_kwargs(),))
+
+
+def _rebuild_linear(kwargs: dict[str, Any]) -> LinearModel:
+    return LinearModel(**kwargs)
+
+
+def _central_jacobian(
+    fun: Callable[[FloatArray, FloatArray | None], FloatArray],
+    x: FloatArray,
+    u: FloatArray | None,
+) -> FloatArray:
+    """Central-difference Jacobian of ``fun`` at a (batch of) point(s), one batched call."""
+    batched = x.ndim == 2
+    X = x if batched else x[None]
+    n_b, n = X.shape
+    step = FD_RELATIVE_STEP * np.maximum(1.0, np.abs(X))            # (n_b, n)
+    E = step[:, :, None] * np.eye(n)                                 # (n_b, n, n): row j = s_j e_j
+    points = np.concatenate([X[:, None, :] + E, X[:, None, :] - E], axis=1).reshape(-1, n)
+    if u is not None:
+        U = np.broadcast_to(u if u.ndim == 2 else u[None], (n_b, u.shape[-1]))
+        U = np.repeat(U, 2 * n, axis=0)
+    else:
+        U = None
+    values = np.asarray(fun(points, U)).reshape(n_b, 2, n, -1)    # (n_b, ±, j, i)
+    J = (values[:, 0] - values[:, 1]) / (2.0 * step[:, :, None])   # (n_b, j, i)
+    J = np.swapaxes(J, 1, 2)                                        # (n_b, i, j)
+    return J if batched else J[0]
+
+
+def _readonly(a: FloatArray) -> FloatArray:
+    a = np.array(a, dtype=np.float64, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+MatrixOrSchedule = ArrayLike | Callable[[int], ArrayLike]
+
+
+class TimeVaryingLinearModel(StateSpaceModel):
+    """Linear time-varying model ``x[k+1] = A_k x[k] + B_k u[k] + G_k w[k]``, ``y[k] = C_k x[k] + v[k]``.
+
+    Each of ``A, C, Q, R, B, G`` is either a constant array or a callable
+    ``k -> array`` (``k`` is the time index of ``x[k]``: ``A(k)`` maps ``x[k]`` to
+    ``x[k+1]``, ``C(k)`` measures ``x[k]``). Sizes are read from the matrices at
+    ``k = 0``. Because the transition depends on ``k``, the time-free callables
+    ``f, h, F, H`` of :class:`StateSpaceModel` are not defined; filters that
+    support time variation read :meth:`matrices` instead.
+    """
+
+    is_linear = True
+    time_invariant = False
+
+    def __init__(
+        self,
+        *,
+        A: MatrixOrSchedule,
+        C: MatrixOrSchedule,
+        Q: MatrixOrSchedule,
+        R: MatrixOrSchedule,
+        B: MatrixOrSchedule | None = None,
+        G: MatrixOrSchedule | None = None,
+        dt: float = 1.0,
+        name: str | None = None,
+    ) -> None:
+        self._schedules = {"A": A, "C": C, "Q": Q, "R": R, "B": B, "G": G}
+        m0 = self.matrices(0)
+        super().__init__(f=_time_varying, h=_time_varying, Q=m0.Q, R=m0.R, dt=dt,
+                         G=m0.G, n_u=m0.B.shape[1], name=name)
+
+    def matrices(self, k: int = 0) -> SystemMatrices:
+        """The system matrices at time ``k``, validated for shape and covariance."""
+        get = {key: (val(k) if callable(val) else val) for key, val in self._schedules.items()}
+        A = as_matrix(f"A({k})", get["A"], (None, None))
+        n = A.shape[0]
+        if A.shape != (n, n):
+            raise ValueError(f"A({k}) must be square; got shape {A.shape}")
+        C = as_matrix(f"C({k})", np.atleast_2d(get["C"]), (None, n))
+        B = np.zeros((n, 0)) if get["B"] is None else as_matrix(
+            f"B({k})", np.reshape(get["B"], (n, -1)), (n, None))
+        Q = as_covariance(f"Q({k})", get["Q"])
+        G = np.eye(n) if get["G"] is None else as_matrix(
+            f"G({k})", np.reshape(get["G"], (n, -1)), (n, Q.shape[0]))
+        if get["G"] is None and Q.shape[0] != n:
+            raise ValueError(f"Q({k}) must be {n}x{n} when G is absent; got {Q.shape}")
+        R = as_covariance(f"R({k})", get["R"], C.shape[0])
+        return SystemMatrices(A, B, C, G, Q, R)
+
+    def f(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        raise TypeError(_TV_MESSAGE)
+
+    def h(self, x: ArrayLike) -> FloatArray:
+        raise TypeError(_TV_MESSAGE)
+
+    def F(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        raise TypeError(_TV_MESSAGE)
+
+    def H(self, x: ArrayLike) -> FloatArray:
+        raise TypeError(_TV_MESSAGE)
+
+    def replace(self, **changes: Any) -> StateSpaceModel:
+        kwargs = {**self._schedules, "dt": self.dt, "name": self.name}
+        unknown = set(changes) - set(kwargs)
+        if unknown:
+            raise ValueError(f"unknown argument(s) {sorted(unknown)}; expected some of {sorted(kwargs)}")
+        return TimeVaryingLinearModel(**{**kwargs, **changes})
+
+
+_TV_MESSAGE = ("a TimeVaryingLinearModel has no time-free f/h/F/H; "
+               "use model.matrices(k) for the matrices at time k")
+
+
+def _time_varying(*_: Any) -> FloatArray:
+    raise TypeError(_TV_MESSAGE)
