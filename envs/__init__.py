@@ -4,6 +4,9 @@ Each plant publishes its ``model`` (a :class:`fir_gym.estimators.StateSpaceModel
 built from nominal parameters) and never imports a concrete filter.
 """
 
+from .carrier_motion import CarrierMotionEnv
 from .orbit import OrbitEnv
+from .uncertain_oscillator import UncertainOscillatorEnv
+from .van_der_pol import VanDerPolEnv
 
-__all__ = ["OrbitEnv"]
+__all__ = ["CarrierMotionEnv", "OrbitEnv", "UncertainOscillatorEnv", "VanDerPolEnv"]

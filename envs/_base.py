@@ -31,11 +31,10 @@ from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
-from numpy.typing import ArrayLike, NDArray
-
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import as_covariance, as_vector
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
@@ -60,6 +59,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         default_nominal: Mapping[str, Any] | None,
         initial_state: ArrayLike,
         initial_state_cov: ArrayLike | None,
+        measurement_cov: ArrayLike,
         render_mode: str | None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -85,12 +85,12 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         self.initial_state_cov = (np.zeros((n_x, n_x)) if initial_state_cov is None
                                   else as_covariance("initial_state_cov", initial_state_cov, n_x))
         self._initial_sqrt = psd_sqrt(self.initial_state_cov)
-        self._measurement_sqrt = psd_sqrt(np.atleast_2d(self.params["R"]))
+        n_y = len(self.measurement_names)
+        self._measurement_sqrt = psd_sqrt(as_covariance("measurement_cov", measurement_cov, n_y))
 
         n_u = len(self.action_names)
         # float32 actions (what stable-baselines3 produces); the plant computes in float64.
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n_u,), dtype=np.float32)
-        n_y = len(self.measurement_names)
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n_y,), dtype=np.float64)
         self.state: FloatArray = self.initial_state.copy()
         self.time_step = 0
@@ -104,8 +104,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
 
     def _measure(self, x: FloatArray) -> FloatArray:
         """Noisy measurement of the state reached at the current step."""
-        return self._noise_free_measurement(x) + self._measurement_sqrt @ self.np_random.standard_normal(
-            self._measurement_sqrt.shape[1])
+        noise = self.np_random.standard_normal(self._measurement_sqrt.shape[1])
+        return self._noise_free_measurement(x) + self._measurement_sqrt @ noise
 
     def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
         raise NotImplementedError

@@ -6,10 +6,9 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike
-
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
+from numpy.typing import ArrayLike
 
 from . import _draw
 from ._base import PlantEnv, psd_sqrt
@@ -169,7 +168,7 @@ class OrbitEnv(PlantEnv):
             raise ValueError(f"need r_min < r_ref < r_max; got {r_min}, {r_ref}, {r_max}")
         super().__init__(params=params, nominal=nominal, default_nominal={"mu": NOMINAL_MU},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         render_mode=render_mode)
+                         measurement_cov=params["R"], render_mode=render_mode)
         self._dynamics = OrbitDynamics(self.params["mu"], self.params["euler_dt"],
                                        self.params["substeps"], self.params["thrust_max"])
         self._process_sqrt = psd_sqrt(self.params["Q"])

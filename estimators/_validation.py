@@ -28,7 +28,8 @@ def as_matrix(name: str, value: ArrayLike, shape: tuple[int | None, int | None])
     if arr.ndim == 0 and shape in ((1, 1), (None, None), (1, None), (None, 1)):
         arr = arr.reshape(1, 1)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D matrix of shape {_fmt(shape)}; got shape {arr.shape}")
+        raise ValueError(
+            f"{name} must be a 2-D matrix of shape {_fmt(shape)}; got shape {arr.shape}")
     for axis, want in enumerate(shape):
         if want is not None and arr.shape[axis] != want:
             raise ValueError(f"{name} must have shape {_fmt(shape)}; got shape {arr.shape}")

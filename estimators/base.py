@@ -75,6 +75,7 @@ class Estimator(ABC):
         if nan_policy not in NAN_POLICIES:
             raise ValueError(f"nan_policy must be one of {NAN_POLICIES}; got {nan_policy!r}")
         self.model = model
+        self._n_y = model.n_y
         self.nan_policy = nan_policy
         self.max_covariance_trace = positive("max_covariance_trace", max_covariance_trace)
         tail = positive("nis_tail", nis_tail)
@@ -118,27 +119,46 @@ class Estimator(ABC):
         self._reset_state()
 
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
-        """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``."""
-        y_ = as_batch("y", y, self.model.n_y)
-        single = y_.ndim == 1
-        Y = y_[None] if single else y_
-        self._ensure_batch(Y.shape[0], single)
-        valid = np.all(np.isfinite(Y), axis=1)
-        if not np.all(valid):
+        """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``.
+
+        The hot path is kept lean (a filter step on a small system costs a few
+        microseconds): shapes are checked with attribute look-ups, finiteness
+        with one reduction, and the exact per-system bookkeeping of
+        :meth:`_accept` runs only when something is off. Floating-point
+        warnings are silenced inside the hooks: a diverging filter is reported
+        through :attr:`diverged`, not through ``RuntimeWarning``.
+        """
+        n_y = self._n_y
+        Y = np.asarray(y, dtype=np.float64)
+        if Y.ndim == 2 and Y.shape[1] == n_y:
+            single = False
+        elif Y.ndim == 1 and Y.shape[0] == n_y:
+            Y, single = Y.reshape(1, n_y), True
+        else:
+            Y = as_batch("y", Y, n_y)       # raises on a wrong shape, or
+            single = Y.ndim == 1           # accepts a scalar when n_y == 1
+            Y = Y.reshape(1, n_y) if single else Y
+        if self._x is None or Y.shape[0] != self._x.shape[0] or single != self._single:
+            self._ensure_batch(Y.shape[0], single)
+        if np.isfinite(Y).all():
+            valid = self._all_valid
+        else:
             if self.nan_policy == "raise":
                 raise ValueError(
                     "y must be finite (nan_policy='raise'); got NaN or inf in the measurement. "
                     "Pass nan_policy='skip' to treat it as missing."
                 )
+            valid = np.all(np.isfinite(Y), axis=1)
             Y = np.where(valid[:, None], Y, 0.0)
-        U = self._check_u(u, Y.shape[0])
-        if self._k == 0:
-            x, P, nis = self._update(self._x, self._P, Y, valid)
-        else:
-            x, P, nis = self._predict_update(self._x, self._P, Y, U, valid)
-        self._accept(x, P, nis, valid)
+        U = self._no_input if u is None else self._check_u(u, Y.shape[0])
+        with np.errstate(all="ignore"):
+            if self._k == 0:
+                x, P, nis = self._update(self._x, self._P, Y, valid)
+            else:
+                x, P, nis = self._predict_update(self._x, self._P, Y, U, valid)
+            self._accept(x, P, nis, valid)
         self._k += 1
-        return self._out(self._x)
+        return self._x[0].copy() if self._single else self._x.copy()
 
     @property
     def x(self) -> FloatArray:
@@ -200,37 +220,67 @@ class Estimator(ABC):
         self._P = np.array(np.broadcast_to(self._P0, (n_batch, n, n)))
         self._diverged = np.zeros(n_batch, bool)
         self._nis_run = np.zeros(n_batch, int)
+        self._nis_running = False
+        self._all_valid = np.ones(n_batch, bool)
+        self._all_valid.setflags(write=False)
+        self._no_input = np.zeros((n_batch, self.model.n_u))
+        self._no_input.setflags(write=False)
         self._init_batch(n_batch)
 
     def _init_batch(self, n_batch: int) -> None:
         """Hook: allocate per-system state once the batch size is known."""
 
-    def _check_u(self, u: ArrayLike | None, n_batch: int) -> FloatArray:
+    def _check_u(self, u: ArrayLike, n_batch: int) -> FloatArray:
         n_u = self.model.n_u
-        if u is None:
-            return np.zeros((n_batch, n_u))
         u_ = np.asarray(u, dtype=np.float64)
-        if u_.ndim == 0 and n_u == 1:
-            u_ = u_.reshape(1)
-        if u_.shape not in ((n_u,), (n_batch, n_u)):
+        if u_.shape == (n_batch, n_u):
+            pass
+        elif u_.shape == (n_u,) or (u_.ndim == 0 and n_u == 1):
+            u_ = u_.reshape(1, n_u)
+            if n_batch > 1:
+                u_ = np.broadcast_to(u_, (n_batch, n_u))
+        else:
             raise ValueError(f"u must have shape ({n_u},) or ({n_batch}, {n_u}); got {u_.shape}")
-        if not np.all(np.isfinite(u_)):
+        if not np.isfinite(u_).all():
             raise ValueError("u must be finite")
-        return np.array(np.broadcast_to(u_, (n_batch, n_u)))
+        return u_
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
-        """Store the new estimate, keeping the last finite one where the new is not."""
+        """Store the new estimate, keeping the last finite one where the new is not.
+
+        Fast path: one finiteness reduction over ``x``, ``max |P|`` (``trace P <=
+        n max|P|``, so ``n max|P| <= max_covariance_trace`` clears every system)
+        and ``max nis``. Only when one of them fails are the exact per-system
+        masks computed.
+        """
+        n = x.shape[1]
+        fine = bool(np.isfinite(x.sum()))
+        if fine and P is not None:
+            fine = bool(abs(P).max() * n <= self.max_covariance_trace)
+        if fine and nis is not None and (self._nis_running or not nis.max() <= self._nis_threshold):
+            fine = False
+        if fine:
+            self._x = x
+            self._P = P
+            if self._single:
+                self.last_info = {"diverged": bool(self._diverged[0]),
+                                  "nis": None if nis is None else float(nis[0])}
+            else:
+                self.last_info = {"diverged": self._diverged.copy(),
+                                  "nis": None if nis is None else nis.copy()}
+            return
         finite = np.all(np.isfinite(x), axis=1)
         if P is not None:
             finite &= np.all(np.isfinite(P), axis=(1, 2))
             trace = np.trace(P, axis1=1, axis2=2)
-            blown = ~finite | (trace > self.max_covariance_trace)
+            blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
         else:
             blown = ~finite
         if nis is not None:
             high = valid & (np.nan_to_num(nis, nan=np.inf) > self._nis_threshold)
             self._nis_run = np.where(high, self._nis_run + 1, 0)
+            self._nis_running = bool(self._nis_run.any())
             blown |= self._nis_run >= self.nis_patience
         self._diverged |= blown
         self._x = np.where(finite[:, None], x, self._x)

@@ -273,8 +273,8 @@ class LinearModel(StateSpaceModel):
         return self.C if x.ndim == 1 else np.broadcast_to(self.C, x.shape[:-1] + self.C.shape)
 
     def _constructor_kwargs(self) -> dict[str, Any]:
-        return {"A": self.A, "C": self.C, "Q": self.Q, "R": self.R, "B": self.B if self.n_u else None,
-                "G": self.G, "dt": self.dt, "name": self.name}
+        return {"A": self.A, "C": self.C, "Q": self.Q, "R": self.R,
+                "B": self.B if self.n_u else None, "G": self.G, "dt": self.dt, "name": self.name}
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Bound methods of self are stored as callables; rebuild from matrices instead.
@@ -318,7 +318,7 @@ MatrixOrSchedule = ArrayLike | Callable[[int], ArrayLike]
 
 
 class TimeVaryingLinearModel(StateSpaceModel):
-    """Linear time-varying model ``x[k+1] = A_k x[k] + B_k u[k] + G_k w[k]``, ``y[k] = C_k x[k] + v[k]``.
+    """Linear time-varying model ``x[k+1] = A_k x[k] + B_k u[k] + G_k w[k]``, ``y = C_k x + v``.
 
     Each of ``A, C, Q, R, B, G`` is either a constant array or a callable
     ``k -> array`` (``k`` is the time index of ``x[k]``: ``A(k)`` maps ``x[k]`` to
@@ -382,7 +382,8 @@ class TimeVaryingLinearModel(StateSpaceModel):
         kwargs = {**self._schedules, "dt": self.dt, "name": self.name}
         unknown = set(changes) - set(kwargs)
         if unknown:
-            raise ValueError(f"unknown argument(s) {sorted(unknown)}; expected some of {sorted(kwargs)}")
+            raise ValueError(
+                f"unknown argument(s) {sorted(unknown)}; expected some of {sorted(kwargs)}")
         return TimeVaryingLinearModel(**{**kwargs, **changes})
 
 

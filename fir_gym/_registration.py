@@ -7,6 +7,10 @@ import gymnasium as gym
 #: (id, entry point, max_episode_steps)
 _SPECS: tuple[tuple[str, str, int], ...] = (
     ("fir_gym/Orbit-v0", "fir_gym.envs.orbit:OrbitEnv", 1000),
+    ("fir_gym/UncertainOscillator-v0",
+     "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv", 500),
+    ("fir_gym/CarrierMotion-v0", "fir_gym.envs.carrier_motion:CarrierMotionEnv", 1000),
+    ("fir_gym/VanDerPol-v0", "fir_gym.envs.van_der_pol:VanDerPolEnv", 100),
 )
 
 #: Every environment id that ``import fir_gym`` registers.

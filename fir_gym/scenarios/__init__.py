@@ -1,1 +1,4 @@
-"""The papers' experiments, one module per paper, each returning a report with the paper's numbers beside ours."""
+"""The papers' experiments, one module per paper.
+
+Each report puts the paper's numbers beside ours.
+"""

@@ -1,0 +1,211 @@
+"""Aircraft-carrier motion at sea: paper 001's plant, discretised exactly."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+import scipy.linalg
+from fir_gym.estimators import LinearModel, discretize_lti
+from fir_gym.estimators._validation import FloatArray, positive
+from numpy.typing import ArrayLike
+
+from . import _draw
+from ._base import PlantEnv, psd_sqrt
+
+PAPER_A21 = -0.36
+PAPER_A22 = -0.06
+PAPER_NOISE_INPUT = (0.6, -0.036)
+
+
+def carrier_continuous(params: Mapping[str, Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Continuous matrices ``(A, G, C)`` of paper 001 §V for the given parameters.
+
+    ``ẋ = [[0, 1], [a21, a22 + Δ22]] x + g w``, ``z = [1 + Δc, 0] x + v``.
+    """
+    A = np.array([[0.0, 1.0], [params["a21"], params["a22"] + params["delta22"]]])
+    G = np.asarray(params["noise_input"], dtype=np.float64).reshape(2, 1)
+    C = np.array([[1.0 + params["delta_c"], 0.0]])
+    return A, G, C
+
+
+def carrier_discrete(params: Mapping[str, Any]) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """Exact sampling ``(A_d, Q_d, C, R_d)`` at ``sample_period`` (Van Loan for ``Q_d``).
+
+    ``R_d = v / T_s``: a continuous measurement of intensity ``v`` read through an
+    integrate-and-dump of length ``T_s`` has that variance; it is applied to the
+    point sample ``C x[k]``, the standard discrete equivalent (exact as ``T_s → 0``).
+    """
+    A, G, C = carrier_continuous(params)
+    T = params["sample_period"]
+    A_d, _, Q_d = discretize_lti(A, T, G=G, Q=params["q"])
+    return A_d, Q_d, C, params["v"] / T
+
+
+class CarrierMotionEnv(PlantEnv):
+    """
+    ## Description
+
+    The motion of an aircraft carrier's deck at sea (Sidar & Doolin, NASA TM X-62,
+    1975), the example of paper 001 (performance bounds of the continuous-time
+    optimal FIR filter, §V). The continuous model
+
+        ẋ = [[0, 1], [-0.36, -0.06 + Δ22]] x + [0.6, -0.036]ᵀ w,   E[w wᵀ] = q δ(t), q = 0.035
+        z = [1 + Δc, 0] x + v,                                      E[v vᵀ] = V δ(t), V = 1
+
+    is sampled exactly at ``sample_period`` (default 0.1 s, about 1/100 of the
+    10.5 s motion period): ``A_d = e^{A T}``, ``Q_d`` by Van Loan's method, and the
+    measurement noise variance ``R_d = V / T`` (an integrate-and-dump of the
+    continuous measurement, applied to the point sample). The true uncertainties
+    Δ22 (|Δ22| ≤ 0.006 in the paper) and Δc (|Δc| ≤ 0.1) default to 0; the
+    filter's :attr:`model` believes Δ22 = Δc = 0 (paper 001's nominal system)
+    whatever the truth, unless ``nominal`` says otherwise; every other model
+    parameter defaults to the truth.
+
+    **Task: deck-motion compensation.** A compensating platform (for instance a
+    landing aid or a motion-compensated gangway) is set at the start of each
+    interval to an offset ``c_k = action * c_max`` and held; the reward penalises
+    the residual deck motion it leaves at the end of the interval,
+    ``x1[k+1] - c_k``. Doing well requires predicting ``x1`` one interval ahead
+    from noisy measurements, which is what the estimators do; the action does not
+    move the carrier (the model's input matrix is zero).
+
+    ## Action Space
+
+    | Num | Action                                   | Min | Max |
+    |-----|------------------------------------------|-----|-----|
+    | 0   | compensator offset, in units of `c_max`  | -1  | 1   |
+
+    ## Observation Space
+
+    | Num | Observation                    | Min  | Max |
+    |-----|--------------------------------|------|-----|
+    | 0   | (1 + Δc) x1 + v, v ~ N(0, V/T) | -Inf | Inf |
+
+    (±inf bounds: the measurement noise is Gaussian; Gymnasium's checker warns.)
+
+    ## State (``info["state"]``)
+
+    ``[x1, x2]``: deck displacement and its rate.
+
+    ## Rewards
+
+    ``-((x1[k+1] - c_k) / σ1)²`` with ``σ1`` the stationary standard deviation of
+    ``x1`` (≈ 0.32 with the paper's values; 1 for a calm sea, ``q = 0``): 0 is
+    perfect compensation, about -1 is doing nothing.
+
+    ## Starting State
+
+    Drawn from the stationary distribution ``N(0, P∞)`` of the true system
+    (``P∞`` from the continuous Lyapunov equation), as paper 001 assumes for the
+    window start; ``initial_state`` / ``initial_state_cov`` override it.
+
+    ## Episode End
+
+    No termination (the plant is stable and linear); truncation at 1000 steps
+    (100 s) by the registered ``TimeLimit``.
+
+    ## Arguments
+
+    ``gym.make("fir_gym/CarrierMotion-v0", sample_period=0.1, q=0.035, v=1.0,
+    delta22=0.0, delta_c=0.0, a21=-0.36, a22=-0.06, noise_input=(0.6, -0.036),
+    c_max=1.0, nominal=None, initial_state=(0, 0), initial_state_cov="stationary",
+    render_mode=None)``. ``nominal`` may change any of ``q, v, delta22, delta_c,
+    a21, a22, noise_input, sample_period`` for the model.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    state_names: ClassVar[tuple[str, ...]] = ("deck", "deck_rate")
+    measurement_names: ClassVar[tuple[str, ...]] = ("deck_measured",)
+    action_names: ClassVar[tuple[str, ...]] = ("compensator_offset",)
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        *,
+        sample_period: float = 0.1,
+        q: float = 0.035,
+        v: float = 1.0,
+        delta22: float = 0.0,
+        delta_c: float = 0.0,
+        a21: float = PAPER_A21,
+        a22: float = PAPER_A22,
+        noise_input: ArrayLike = PAPER_NOISE_INPUT,
+        c_max: float = 1.0,
+        nominal: Mapping[str, Any] | None = None,
+        initial_state: ArrayLike = (0.0, 0.0),
+        initial_state_cov: ArrayLike | str | None = "stationary",
+        render_mode: str | None = None,
+    ) -> None:
+        noise_input_ = np.asarray(noise_input, dtype=np.float64)
+        if noise_input_.shape != (2,) or not np.all(np.isfinite(noise_input_)):
+            raise ValueError(f"noise_input must be 2 finite numbers; got {noise_input!r}")
+        params = {
+            "sample_period": positive("sample_period", sample_period),
+            "q": _non_negative("q", q),
+            "v": positive("v", v),
+            "delta22": float(delta22),
+            "delta_c": float(delta_c),
+            "a21": float(a21),
+            "a22": float(a22),
+            "noise_input": tuple(noise_input_),
+        }
+        A, G, _ = carrier_continuous(params)
+        if np.max(np.linalg.eigvals(A).real) >= 0:
+            raise ValueError("a21, a22 + delta22 must give a stable carrier model (the stationary "
+                             f"distribution must exist); eigenvalues {np.linalg.eigvals(A)}")
+        self.stationary_cov = scipy.linalg.solve_continuous_lyapunov(A, -params["q"] * G @ G.T)
+        self.c_max = positive("c_max", c_max)
+        if isinstance(initial_state_cov, str):
+            if initial_state_cov != "stationary":
+                raise ValueError("initial_state_cov must be 'stationary', None or a 2x2 "
+                                 f"covariance; got {initial_state_cov!r}")
+            initial_state_cov = self.stationary_cov
+        A_d, Q_d, C, R_d = carrier_discrete(params)
+        super().__init__(params=params, nominal=nominal,
+                         default_nominal={"delta22": 0.0, "delta_c": 0.0},
+                         initial_state=initial_state, initial_state_cov=initial_state_cov,
+                         measurement_cov=R_d, render_mode=render_mode)
+        self._A_d, self._C = A_d, C
+        self._process_sqrt = psd_sqrt(Q_d)
+        # reward normaliser; a calm sea (q = 0) has no stationary spread, use 1
+        self._sigma1 = float(np.sqrt(self.stationary_cov[0, 0])) or 1.0
+        self._offset = 0.0
+
+    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
+        self._offset = float(a[0]) * self.c_max
+        return self._A_d @ x + self._process_sqrt @ self.np_random.standard_normal(2)
+
+    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+        return self._C @ x
+
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+        return -float(((x_next[0] - float(a[0]) * self.c_max) / self._sigma1) ** 2)
+
+    def _build_model(self, params: Mapping[str, Any]) -> LinearModel:
+        A_d, Q_d, C, R_d = carrier_discrete(params)
+        return LinearModel(A=A_d, C=C, Q=Q_d, R=R_d, B=np.zeros((2, 1)),
+                           dt=params["sample_period"], name="CarrierMotion")
+
+    def _draw(self, canvas: _draw.Canvas) -> None:
+        s = 3.0 * self._sigma1
+        canvas.set_view((-2.0 * s, 2.0 * s), (-1.5 * s, 1.5 * s))
+        heave = float(np.clip(self.state[0], -1.4 * s, 1.4 * s))
+        canvas.rect(-2.0 * s, -1.5 * s, 2.0 * s, 0.0, (205, 225, 240))       # sea
+        hull_x = [-1.4 * s, 1.4 * s, 1.1 * s, -1.1 * s]
+        hull_y = [heave, heave, heave - 0.35 * s, heave - 0.35 * s]
+        canvas.polygon(hull_x, hull_y, _draw.INK)                             # hull
+        canvas.rect(-1.4 * s, heave, 1.4 * s, heave + 0.06 * s, _draw.GREY)   # deck
+        c = float(np.clip(self._offset, -1.4 * s, 1.4 * s))
+        canvas.line(1.6 * s, c, 1.9 * s, c, _draw.ACCENT, width=4.0)          # compensator
+
+
+def _non_negative(name: str, value: Any) -> float:
+    val = float(value)
+    if not np.isfinite(val) or val < 0:
+        raise ValueError(f"{name} must be a non-negative finite number; got {value!r}")
+    return val

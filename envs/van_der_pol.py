@@ -1,0 +1,287 @@
+"""Stochastic Van der Pol oscillator with a continuous measurement: paper 002's example."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._validation import FloatArray, positive
+from numpy.typing import ArrayLike
+
+from . import _draw
+from ._base import PlantEnv
+
+NOISE_INPUT = np.array([1.0, 1.0])
+
+
+class VanDerPolDynamics:
+    """``ẋ1 = x2``, ``ẋ2 = -x1 + ε (1 - x1²) x2 + u_max·u`` integrated by Heun's method.
+
+    Paper 002, §4 (ε = 1). One env step of length ``h`` is ``substeps`` Heun steps of
+    ``τ = h / substeps``; with additive noise ``[1, 1]ᵀ dW`` each Heun step is the
+    stochastic Heun scheme (strong order 1 for additive noise):
+    ``x̃ = x + a(x) τ + g ΔW``, ``x⁺ = x + (a(x) + a(x̃)) τ / 2 + g ΔW``.
+    The Jacobian of the noise-free interval map is the product of the Heun step
+    Jacobians ``I + τ/2 (J(x) + J(x̃)(I + τ J(x)))``, ``J = ∂a/∂x``.
+
+    :meth:`A_of_x` is the state-dependent factorisation ``a(x) = A(x) x`` (for
+    ``u = 0``) that paper 002's adaptive piecewise linearisation freezes on each
+    block-pulse interval: ``A(x) = [[0, 1], [-1, ε (1 - x1²)]]``.
+    """
+
+    def __init__(self, epsilon: float, h: float, substeps: int, u_max: float) -> None:
+        self.epsilon, self.interval, self.substeps, self.u_max = epsilon, h, substeps, u_max
+        self.tau = h / substeps
+
+    def A_of_x(self, x: FloatArray) -> FloatArray:
+        """``A(x)`` with ``a(x, 0) = A(x) x`` (paper 002, eqs 2.9–2.10)."""
+        x1 = x[..., 0]
+        A = np.zeros(x.shape[:-1] + (2, 2))
+        A[..., 0, 1] = 1.0
+        A[..., 1, 0] = -1.0
+        A[..., 1, 1] = self.epsilon * (1.0 - x1 * x1)
+        return A
+
+    def integrate(
+        self, x: FloatArray, u: FloatArray, dW: FloatArray | None = None, jacobian: bool = False
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """Integrate one interval; returns ``(x_end, mean of x1 over the interval, Jacobian)``.
+
+        ``dW`` holds the ``substeps`` Wiener increments (``None`` for noise-free).
+        The interval mean of ``x1`` uses the trapezoid rule on the Heun grid.
+        The loop runs on components, so one code path serves a single system
+        (Python floats: fast for the plant) and a batch (numpy arrays: the model).
+        """
+        single = x.ndim == 1
+        x1, x2 = (float(x[0]), float(x[1])) if single else (x[..., 0], x[..., 1])
+        force = float(u[0]) * self.u_max if single else u[..., 0] * self.u_max
+        tau, eps, half = self.tau, self.epsilon, 0.5 * self.tau
+        noise = [0.0] * self.substeps if dW is None else dW.tolist()
+        x1_sum = 0.5 * x1
+        if jacobian:  # Φ = [[p11, p12], [p21, p22]], the product of Heun step Jacobians
+            p11, p12, p21, p22 = 1.0, 0.0, 0.0, 1.0
+        for dw in noise:
+            a1 = -x1 + eps * (1.0 - x1 * x1) * x2 + force          # drift at x
+            y1 = x1 + x2 * tau + dw                                  # Euler predictor x̃
+            y2 = x2 + a1 * tau + dw
+            b1 = -y1 + eps * (1.0 - y1 * y1) * y2 + force          # drift at x̃
+            if jacobian:
+                # J(z) = [[0, 1], [c(z), d(z)]]; step Jacobian I + τ/2 (J0 + J1 (I + τ J0))
+                c0, d0 = -1.0 - 2.0 * eps * x1 * x2, eps * (1.0 - x1 * x1)
+                c1, d1 = -1.0 - 2.0 * eps * y1 * y2, eps * (1.0 - y1 * y1)
+                m11, m12 = 1.0, tau                                  # I + τ J0
+                m21, m22 = tau * c0, 1.0 + tau * d0
+                s11 = 1.0 + half * m21                               # row 1 of J1 is [0, 1]
+                s12 = half * (1.0 + m22)
+                s21 = half * (c0 + c1 * m11 + d1 * m21)
+                s22 = 1.0 + half * (d0 + c1 * m12 + d1 * m22)
+                p11, p12, p21, p22 = (s11 * p11 + s12 * p21, s11 * p12 + s12 * p22,
+                                      s21 * p11 + s22 * p21, s21 * p12 + s22 * p22)
+            x1, x2 = x1 + 0.5 * (x2 + y2) * tau + dw, x2 + 0.5 * (a1 + b1) * tau + dw
+            x1_sum = x1_sum + x1
+        x1_mean = (x1_sum - 0.5 * x1) / self.substeps
+        x_end = np.array([x1, x2]) if single else np.stack([x1, x2], axis=-1)
+        if not jacobian:
+            return x_end, x1_mean, None
+        Phi = np.stack([np.stack(np.broadcast_arrays(p11, p12), -1),
+                        np.stack(np.broadcast_arrays(p21, p22), -1)], -2)
+        return x_end, x1_mean, Phi
+
+    def f(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        return self.integrate(x, u)[0]
+
+    def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        return self.integrate(x, u, jacobian=True)[2]
+
+    @staticmethod
+    def h(x: FloatArray) -> FloatArray:
+        return x[..., :1].copy()
+
+    @staticmethod
+    def H(x: FloatArray) -> FloatArray:
+        return np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)).copy()
+
+
+class VanDerPolEnv(PlantEnv):
+    """
+    ## Description
+
+    The stochastic Van der Pol oscillator of paper 002 ("Kalman filter for a
+    nonlinear stochastic system via block pulse functions", §4):
+
+        ẋ1 = x2
+        ẋ2 = -x1 + ε (1 - x1²) x2 + u          (ε = 1)
+        dx = a(x) dt + [1, 1]ᵀ dW,  E[dW²] = Q dt,  Q = 5
+        z  = x1 + v,                 continuous white noise of intensity R = 5
+
+    Without noise it settles on a limit cycle of amplitude ≈ 2. The plant is
+    integrated with ``substeps`` (100) stochastic Heun steps per env step of
+    ``h = 0.1 s`` (paper: m = 100 block-pulse intervals over t_f = 10 s). The
+    measurement is continuous, so each env step returns its block-pulse
+    coefficient — the average of ``z`` over the interval just ended:
+    ``y[k] = (1/h) ∫ x1 dt + v̄[k]``, ``v̄ ~ N(0, R/h)`` (variance 50 with the
+    paper's values; the signal is deeply buried). The observation returned by
+    ``reset`` is ``x1(0) + v̄[0]`` (the degenerate interval).
+
+    The filter's :attr:`model` is the noise-free Heun map over one interval
+    (``f``, with its exact Jacobian ``F``), ``h(x) = x1`` at the interval's end
+    (the interval average differs from it by about ``h x2 / 2``; a filter that
+    wants the exact average can use the block-pulse formulation of paper 002),
+    ``R_model = R/h`` and the first-order process noise ``G = [1, 1]ᵀ``,
+    ``Q_model = Q h``.
+
+    ## Action Space
+
+    | Num | Action                                    | Min | Max |
+    |-----|-------------------------------------------|-----|-----|
+    | 0   | force on the x2 equation, units of u_max  | -1  | 1   |
+
+    ## Observation Space
+
+    | Num | Observation                          | Min  | Max |
+    |-----|--------------------------------------|------|-----|
+    | 0   | interval average of x1 + v̄           | -Inf | Inf |
+
+    (±inf bounds: the measurement noise is Gaussian; Gymnasium's checker warns.)
+
+    ## State (``info["state"]``)
+
+    ``[x1, x2]``; ``info["x1_average"]`` is the noise-free interval average of x1.
+
+    ## Rewards
+
+    Suppress the limit cycle: ``-(x1² + x2²)/4 - 0.01 action²`` at the end of the step.
+
+    ## Starting State
+
+    ``[1, 1]`` (the paper's) plus a draw from ``N(0, initial_state_cov)`` (zero by
+    default).
+
+    ## Episode End
+
+    Termination when ``|x1|`` or ``|x2|`` exceeds ``state_bound`` (20), which
+    also keeps the integrator accurate (the stiff eigenvalue near ``|x1| = b`` is
+    about ``-ε b²``; the constructor checks ``ε b² τ <= 0.5``). Truncation at 100
+    steps (10 s, the paper's t_f) by the registered ``TimeLimit``.
+
+    Because the noise enters ``x1`` directly, the stochastic oscillator does not
+    stay near its limit cycle on long runs: away from it ``x2`` relaxes onto the
+    slow manifold ``x2 ≈ -x1 / (ε (x1² - 1))`` and ``x1`` diffuses with only the
+    weak restoring drift ``≈ -1/x1``, spreading like ``√(Q t)`` (≈ 7 after the
+    paper's 10 s, ≈ 45 after 400 s). Long uncontrolled runs therefore end at the
+    domain bound; a controller that suppresses the cycle keeps the state small.
+
+    ## Arguments
+
+    ``gym.make("fir_gym/VanDerPol-v0", epsilon=1.0, Q=5.0, R=5.0, h=0.1,
+    substeps=100, u_max=5.0, state_bound=50.0, nominal=None,
+    initial_state=(1, 1), initial_state_cov=None, render_mode=None)``.
+    ``nominal`` may change ``epsilon, Q, R, h, substeps, u_max`` for the model.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    state_names: ClassVar[tuple[str, ...]] = ("x1", "x2")
+    measurement_names: ClassVar[tuple[str, ...]] = ("x1_average_measured",)
+    action_names: ClassVar[tuple[str, ...]] = ("force",)
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        *,
+        epsilon: float = 1.0,
+        Q: float = 5.0,
+        R: float = 5.0,
+        h: float = 0.1,
+        substeps: int = 100,
+        u_max: float = 5.0,
+        state_bound: float = 20.0,
+        nominal: Mapping[str, Any] | None = None,
+        initial_state: ArrayLike = (1.0, 1.0),
+        initial_state_cov: ArrayLike | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        Q_ = float(Q)
+        if not np.isfinite(Q_) or Q_ < 0:
+            raise ValueError(f"Q must be a non-negative spectral density; got {Q!r}")
+        params = {
+            "epsilon": float(epsilon),
+            "Q": Q_,
+            "R": positive("R", R),
+            "h": positive("h", h),
+            "substeps": positive("substeps", substeps, integer=True),
+            "u_max": positive("u_max", u_max),
+        }
+        self.state_bound = positive("state_bound", state_bound)
+        # Heun is stable for real eigenvalues z = λτ in [-2, 0]; near |x1| = b the
+        # stiff eigenvalue is about -ε b², so keep ε b² τ <= 0.5 for accuracy.
+        tau = params["h"] / params["substeps"]
+        if abs(params["epsilon"]) * self.state_bound**2 * tau > 0.5:
+            raise ValueError(
+                f"state_bound={state_bound} is too large for substeps={substeps}: the Heun "
+                f"step needs |epsilon| * state_bound² * h / substeps <= 0.5 (got "
+                f"{abs(params['epsilon']) * self.state_bound**2 * tau:.3g}); raise substeps"
+            )
+        super().__init__(params=params, nominal=nominal, default_nominal=None,
+                         initial_state=initial_state, initial_state_cov=initial_state_cov,
+                         measurement_cov=params["R"] / params["h"], render_mode=render_mode)
+        self._dynamics = self._make_dynamics(self.params)
+        self._x1_average = float(self.initial_state[0])
+        self._trail: list[tuple[float, float]] = []
+
+    @staticmethod
+    def _make_dynamics(params: Mapping[str, Any]) -> VanDerPolDynamics:
+        return VanDerPolDynamics(params["epsilon"], params["h"], params["substeps"],
+                                 params["u_max"])
+
+    @property
+    def dynamics(self) -> VanDerPolDynamics:
+        """The true dynamics (exposes ``A_of_x`` for block-pulse filters)."""
+        return self._dynamics
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[FloatArray, dict[str, Any]]:
+        self._trail = []
+        self._x1_average = None  # the first measurement is of x1(0) itself
+        return super().reset(seed=seed, options=options)
+
+    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
+        dyn = self._dynamics
+        dW = np.sqrt(self.params["Q"] * dyn.tau) * self.np_random.standard_normal(dyn.substeps)
+        x_next, self._x1_average, _ = dyn.integrate(x, a, dW)
+        self._trail.append((float(x_next[0]), float(x_next[1])))
+        return x_next
+
+    def step(self, action: ArrayLike) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        info["x1_average"] = float(self._x1_average)
+        return obs, reward, terminated, truncated, info
+
+    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+        return np.array([x[0] if self._x1_average is None else self._x1_average])
+
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+        return -0.25 * float(x_next @ x_next) - 0.01 * float(a[0] ** 2)
+
+    def _in_domain(self, x: FloatArray) -> bool:
+        return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= self.state_bound))
+
+    def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
+        dyn = self._make_dynamics(params)
+        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, G=NOISE_INPUT.reshape(2, 1),
+                               Q=params["Q"] * params["h"], R=params["R"] / params["h"],
+                               dt=params["h"], n_u=1, name="VanDerPol")
+
+    def _draw(self, canvas: _draw.Canvas) -> None:
+        canvas.set_view((-4.0, 4.0), (-3.0, 3.0))
+        canvas.line(-4.0, 0.0, 4.0, 0.0, _draw.GREY, width=1.0)
+        canvas.line(0.0, -3.0, 0.0, 3.0, _draw.GREY, width=1.0)
+        if len(self._trail) > 1:
+            xs, ys = zip(*self._trail[-60:], strict=True)
+            canvas.polyline(xs, ys, _draw.BLUE, width=1.5)
+        canvas.circle(float(np.clip(self.state[0], -4, 4)), float(np.clip(self.state[1], -3, 3)),
+                      0.12, _draw.ACCENT)
