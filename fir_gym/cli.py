@@ -33,10 +33,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
     rows = []
     for env_id in ENV_IDS:
-        spec = gym.spec(env_id)
-        doc = (gym.make(env_id).unwrapped.__class__.__module__)
-        rows.append([env_id, spec.max_episode_steps, doc])
-    print(format_table(["environment", "max steps", "module"], rows))
+        plant = gym.make(env_id).unwrapped
+        rows.append([env_id, gym.spec(env_id).max_episode_steps, ", ".join(plant.state_names),
+                     ", ".join(plant.measurement_names), ", ".join(plant.action_names)])
+    print(format_table(["environment", "max steps", "state", "measurement", "action"], rows))
     print()
     print("estimators:", ", ".join(estimator_names()) or "(none registered)")
     return 0
@@ -48,7 +48,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     summaries = episodes.run_all(seed=args.seed)
     headers, rows = episodes.summary_rows(summaries)
     text = format_table(headers, rows, markdown=args.markdown)
-    print("Scripted episodes (one per environment, seed %d)\n" % args.seed)
+    print(f"Scripted episodes (one per environment, seed {args.seed})\n")
     print(text)
     if args.out:
         out = Path(args.out)

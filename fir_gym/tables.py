@@ -50,5 +50,5 @@ def _cell(value: Any, floatfmt: str) -> str:
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) or (
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)) or (
         hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0)

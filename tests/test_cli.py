@@ -1,0 +1,32 @@
+"""The fir-gym command."""
+
+import pytest
+
+import fir_gym
+from fir_gym.cli import main
+
+
+def test_reproduce_prints_one_block_per_environment(capsys, tmp_path):
+    assert main(["reproduce", "--seed", "3", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for env_id in fir_gym.ENV_IDS:
+        assert env_id.split("/")[-1] in out
+    assert (tmp_path / "episodes.md").read_text().startswith("| env")
+
+
+def test_list_names_every_environment(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert all(env_id in out for env_id in fir_gym.ENV_IDS)
+
+
+def test_unknown_subcommand_is_an_argparse_error():
+    with pytest.raises(SystemExit) as exc:
+        main(["nonsense"])
+    assert exc.value.code == 2
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert fir_gym.__version__ in capsys.readouterr().out
