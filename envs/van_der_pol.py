@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -277,11 +278,25 @@ class VanDerPolEnv(PlantEnv):
                                dt=params["h"], n_u=1, name="VanDerPol")
 
     def _draw(self, canvas: _draw.Canvas) -> None:
-        canvas.set_view((-4.0, 4.0), (-3.0, 3.0))
-        canvas.line(-4.0, 0.0, 4.0, 0.0, _draw.GREY, width=1.0)
-        canvas.line(0.0, -3.0, 0.0, 3.0, _draw.GREY, width=1.0)
-        if len(self._trail) > 1:
-            xs, ys = zip(*self._trail[-60:], strict=True)
-            canvas.polyline(xs, ys, _draw.BLUE, width=1.5)
-        canvas.circle(float(np.clip(self.state[0], -4, 4)), float(np.clip(self.state[1], -3, 3)),
-                      0.12, _draw.ACCENT)
+        trail = np.array(self._trail[-60:] + [tuple(self.state)])
+        extent = max(3.0, 1.1 * float(np.max(np.abs(trail))))
+        canvas.set_view((-extent * 4 / 3, extent * 4 / 3), (-extent, extent))
+        canvas.line(-2 * extent, 0.0, 2 * extent, 0.0, _draw.GREY, width=1.0)
+        canvas.line(0.0, -extent, 0.0, extent, _draw.GREY, width=1.0)
+        cycle = _limit_cycle(self.params["epsilon"])
+        canvas.polyline(cycle[:, 0], cycle[:, 1], _draw.GREY, width=1.0)   # noise-free cycle
+        if len(trail) > 1:
+            canvas.polyline(trail[:, 0], trail[:, 1], _draw.BLUE, width=1.5)
+        canvas.circle(float(self.state[0]), float(self.state[1]), 0.03 * extent, _draw.ACCENT)
+
+
+@functools.lru_cache(maxsize=8)
+def _limit_cycle(epsilon: float) -> FloatArray:
+    """Points on the noise-free limit cycle (for drawing), after a 40 s transient."""
+    dyn = VanDerPolDynamics(epsilon, 0.05, 50, 1.0)
+    x, u, points = np.array([2.0, 0.0]), np.zeros(1), []
+    for k in range(1000):
+        x = dyn.f(x, u)
+        if k >= 800:
+            points.append(x)
+    return np.array(points)
