@@ -7,8 +7,11 @@ class does what must be identical everywhere:
 * **Actions.** The action space is ``Box(-1, 1, (n_u,), float32)``; the plant
   scales it to physical units. A NaN/inf or wrongly shaped action raises
   ``ValueError`` naming the action. An out-of-bounds action is *clipped* to
-  ``[-1, 1]`` (what stable-baselines3 does before calling ``step``) and
-  ``info["action_clipped"]`` says so. A size-1 action may be a scalar.
+  ``[-1, 1]`` (what stable-baselines3 does before calling ``step``);
+  ``info["action"]`` is the action applied (float64, after clipping) and
+  ``info["action_clipped"]`` says whether it was clipped. A size-1 action may be
+  a scalar. Filters must be fed ``info["action"]``: the model's ``u`` is the
+  applied action.
 * **Randomness.** Every draw (initial state, process and measurement noise)
   comes from ``self.np_random``, seeded by ``reset(seed=...)`` as Gymnasium
   prescribes.
@@ -170,7 +173,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         terminated = not self._in_domain(x_next)
         reward = self._reward(x, a, x_next)
         self.state = x_next
-        info: dict[str, Any] = {"state": x_next.copy(), "action_clipped": clipped}
+        info: dict[str, Any] = {"state": x_next.copy(), "action": a.copy(),
+                                "action_clipped": clipped}
         if np.all(np.isfinite(x_next)):
             obs = self._measure(x_next)
         else:

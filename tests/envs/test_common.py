@@ -160,6 +160,8 @@ def test_out_of_bounds_action_is_clipped_and_reported(env_id):
     _, _, _, _, info_plain = plain.step(np.ones(plain.action_space.shape))
     _, _, _, _, info_big = big.step(np.full(big.action_space.shape, 7.0))
     assert info_big["action_clipped"] and not info_plain["action_clipped"]
+    assert np.array_equal(info_big["action"], np.ones(big.action_space.shape))
+    assert info_big["action"].dtype == np.float64
     assert np.array_equal(info_plain["state"], info_big["state"])
 
 
