@@ -1,25 +1,40 @@
-"""Registration of the fir-gym environment ids with Gymnasium."""
+"""Registration of the fir-gym environment ids with Gymnasium.
+
+Every id's entry point is a factory (``fir_gym._registration:<name>``) that builds
+the plant and, when asked, wraps it: ``gym.make(id, estimator="ekf",
+estimator_kwargs={...}, observation="estimate")`` (see
+:func:`fir_gym.wrappers.factory.make_plant`).
+"""
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-#: (id, entry point, max_episode_steps)
-_SPECS: tuple[tuple[str, str, int], ...] = (
-    ("fir_gym/Orbit-v0", "fir_gym.envs.orbit:OrbitEnv", 1000),
-    ("fir_gym/UncertainOscillator-v0",
+from .wrappers.factory import plant_factory
+
+#: (id, entry-point name in this module, plant class, max_episode_steps)
+_SPECS: tuple[tuple[str, str, str, int], ...] = (
+    ("fir_gym/Orbit-v0", "orbit", "fir_gym.envs.orbit:OrbitEnv", 1000),
+    ("fir_gym/UncertainOscillator-v0", "uncertain_oscillator",
      "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv", 500),
-    ("fir_gym/CarrierMotion-v0", "fir_gym.envs.carrier_motion:CarrierMotionEnv", 1000),
-    ("fir_gym/VanDerPol-v0", "fir_gym.envs.van_der_pol:VanDerPolEnv", 100),
+    ("fir_gym/CarrierMotion-v0", "carrier_motion",
+     "fir_gym.envs.carrier_motion:CarrierMotionEnv", 1000),
+    ("fir_gym/VanDerPol-v0", "van_der_pol", "fir_gym.envs.van_der_pol:VanDerPolEnv", 100),
 )
 
 #: Every environment id that ``import fir_gym`` registers.
 ENV_IDS: tuple[str, ...] = tuple(spec[0] for spec in _SPECS)
 
+# One module attribute per plant (``orbit``, ``van_der_pol``, ...), so that each
+# registered entry point is a plain string "fir_gym._registration:<name>".
+for _env_id, _name, _plant, _steps in _SPECS:
+    globals()[_name] = plant_factory(_plant)
+
 
 def register_envs() -> None:
     """Register every id in :data:`ENV_IDS` (idempotent)."""
-    for env_id, entry_point, max_steps in _SPECS:
+    for env_id, name, _plant, max_steps in _SPECS:
         if env_id in gym.registry:
             continue
-        gym.register(id=env_id, entry_point=entry_point, max_episode_steps=max_steps)
+        gym.register(id=env_id, entry_point=f"fir_gym._registration:{name}",
+                     max_episode_steps=max_steps)

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 import scipy.integrate
 import scipy.linalg
-from fir_gym.envs.carrier_motion import carrier_continuous
 
 import fir_gym  # noqa: F401
+from fir_gym.envs.carrier_motion import carrier_continuous
 
 
 def test_discrete_stationary_covariance_equals_the_continuous_one():

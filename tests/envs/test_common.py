@@ -8,12 +8,12 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from fir_gym.estimators.model import _central_jacobian
 from gymnasium.utils.env_checker import check_env
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import fir_gym
+from fir_gym.estimators.model import _central_jacobian
 
 ENV_IDS = fir_gym.ENV_IDS
 

@@ -3,9 +3,9 @@
 import gymnasium as gym
 import numpy as np
 import pytest
-from fir_gym.envs.orbit import NOMINAL_MU, TRUE_MU
 
 import fir_gym  # noqa: F401  (registers the ids)
+from fir_gym.envs.orbit import NOMINAL_MU, TRUE_MU
 
 
 def euler_orbit(x, mu, steps, dt=1e-4, thrust=0.0):

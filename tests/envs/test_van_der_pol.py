@@ -4,9 +4,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import scipy.integrate
-from fir_gym.estimators import discretize_lti
 
 import fir_gym  # noqa: F401
+from fir_gym.estimators import discretize_lti
 
 
 def vdp(t, x, force=0.0):

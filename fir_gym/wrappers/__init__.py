@@ -1,0 +1,14 @@
+"""Observation wrappers: estimators in the loop, and the two baselines they are compared with."""
+
+from .baselines import MeasurementObservation, TrueStateObservation
+from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
+from .factory import wrap_observation
+
+__all__ = [
+    "OBSERVATION_KINDS",
+    "EstimatorObservation",
+    "MeasurementObservation",
+    "TrueStateObservation",
+    "default_prior",
+    "wrap_observation",
+]

@@ -1,0 +1,156 @@
+"""An estimator in the loop: the controller sees the filter's estimate, not the measurement."""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from fir_gym.estimators import Estimator, estimator_class
+
+OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
+
+#: Added to a singular initial-state covariance so that sigma-point filters can start:
+#: the plant's initial state is then "known up to round-off".
+PRIOR_FLOOR = 1e-9
+
+
+def resolve_estimator(
+    env: gym.Env, estimator: Estimator | type[Estimator] | str, options: dict[str, Any]
+) -> Estimator:
+    """An estimator instance for ``env`` from an instance, a class or a registry name.
+
+    Classes and names are built as ``cls(env.unwrapped.model, **options)``; when the
+    options give no prior (``x0``/``P0``), the plant's initial-state distribution is
+    used (see :func:`default_prior`). An instance is used as it is (``options`` must
+    then be empty).
+    """
+    if isinstance(estimator, Estimator):
+        if options:
+            raise ValueError(f"estimator options {sorted(options)} given with an estimator "
+                             "instance; configure the instance instead")
+        return estimator
+    if isinstance(estimator, str):
+        cls = estimator_class(estimator)
+    elif isinstance(estimator, type) and issubclass(estimator, Estimator):
+        cls = estimator
+    else:
+        raise TypeError("estimator must be an Estimator instance, an Estimator subclass or a "
+                        f"registry name; got {estimator!r}")
+    model = getattr(env.unwrapped, "model", None)
+    if model is None:
+        raise ValueError(f"{type(env.unwrapped).__name__} has no `model`: an estimator needs the "
+                         "plant's StateSpaceModel (env.unwrapped.model)")
+    options = dict(options)
+    x0, P0 = default_prior(env)
+    if x0 is not None:
+        options.setdefault("x0", x0)
+        options.setdefault("P0", P0)
+    return cls(model, **options)
+
+
+def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The plant's initial-state mean and covariance (floored to stay positive definite)."""
+    plant = env.unwrapped
+    x0 = getattr(plant, "initial_state", None)
+    P0 = getattr(plant, "initial_state_cov", None)
+    if x0 is None or P0 is None:
+        return None, None
+    x0 = np.asarray(x0, dtype=np.float64)
+    P0 = np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
+    return x0.copy(), P0
+
+
+class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Replace the measurement observation by a state estimate (ARCHITECTURE.md, data flow).
+
+    Args:
+        env: a plant whose ``env.unwrapped.model`` is a
+            :class:`~fir_gym.estimators.StateSpaceModel`.
+        estimator: an :class:`~fir_gym.estimators.Estimator` instance, class, or registry
+            name (``"ekf"``, ``"efir"``, ...); classes and names are built from the
+            plant's model with ``**options``.
+        observation: ``"estimate"`` (a ``Box(n_x)``), ``"estimate+covariance"`` (a
+            ``Dict`` with ``estimate`` and ``covariance``, the upper triangle of ``P``
+            row by row, ``n_x (n_x + 1) / 2`` numbers) or ``"estimate+measurement"``
+            (a ``Dict`` with ``estimate`` and ``measurement``).
+        **options: estimator options (``horizon=10``, ``alpha=1e-3``, ``x0``, ``P0``, ...).
+
+    On ``reset`` the estimator is reset to its prior and consumes ``y[0]`` (an
+    update only); on ``step(u)`` it consumes ``y[k]`` with the *applied* input
+    ``info["action"]`` (after the plant's clipping). ``info`` gains ``estimate``,
+    ``estimation_error`` (``state - estimate``, where the true state is known),
+    ``estimator_diverged`` and ``estimator_info`` (the filter's ``last_info``). A
+    filter that diverges keeps returning its last finite estimate and says so;
+    the observation is never NaN.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        estimator: Estimator | type[Estimator] | str,
+        observation: str = "estimate",
+        **options: Any,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, estimator=estimator,
+                                                 observation=observation, **options)
+        gym.Wrapper.__init__(self, env)
+        if observation not in OBSERVATION_KINDS:
+            raise ValueError(f"observation must be one of {OBSERVATION_KINDS}; got {observation!r}")
+        self.estimator = resolve_estimator(env, estimator, options)
+        self.observation_kind = observation
+        self._x0 = self.estimator.x
+        self._P0 = self.estimator.P
+        n_x = self.estimator.model.n_x
+        estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
+        if observation == "estimate":
+            self.observation_space = estimate
+        elif observation == "estimate+covariance":
+            if not getattr(self.estimator, "provides_covariance", True):
+                raise ValueError(f"{type(self.estimator).__name__} has no covariance; use "
+                                 "observation='estimate' or 'estimate+measurement'")
+            self._triu = np.triu_indices(n_x)
+            self.observation_space = spaces.Dict({
+                "estimate": estimate,
+                "covariance": spaces.Box(-np.inf, np.inf, shape=(len(self._triu[0]),),
+                                         dtype=np.float64),
+            })
+        else:
+            self.observation_space = spaces.Dict({
+                "estimate": estimate,
+                "measurement": env.observation_space,
+            })
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[Any, dict[str, Any]]:
+        y, info = self.env.reset(seed=seed, options=options)
+        self.estimator.reset(self._x0, self._P0)
+        x_hat = self.estimator.step(y)
+        return self._observe(x_hat, y), self._annotate(info, x_hat)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        y, reward, terminated, truncated, info = self.env.step(action)
+        u = info.get("action", action)
+        x_hat = self.estimator.step(y, u)
+        return self._observe(x_hat, y), reward, terminated, truncated, self._annotate(info, x_hat)
+
+    # ------------------------------------------------------------------ helpers
+    def _observe(self, x_hat: NDArray[np.float64], y: NDArray[np.float64]) -> Any:
+        if self.observation_kind == "estimate":
+            return x_hat
+        if self.observation_kind == "estimate+covariance":
+            return {"estimate": x_hat, "covariance": self.estimator.P[self._triu]}
+        return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
+
+    def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:
+        info = dict(info)
+        info["estimate"] = x_hat.copy()
+        if "state" in info:
+            info["estimation_error"] = np.asarray(info["state"]) - x_hat
+        info["estimator_diverged"] = bool(self.estimator.diverged)
+        info["estimator_info"] = dict(self.estimator.last_info)
+        return info
