@@ -7,13 +7,17 @@ Subcommands:
   episode per environment with a table of state and measurement statistics;
   the papers' experiments are added as their estimators land);
 * ``fir-gym bench NAME`` — a speed benchmark (ratios against a reference timed in
-  the same run).
+  the same run);
+* ``fir-gym train`` / ``evaluate`` / ``compare-controllers`` — controllers trained
+  with stable-baselines3 on true states, raw measurements or estimates
+  (needs the ``rl`` extra).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import os
 import sys
 from collections.abc import Sequence
@@ -70,6 +74,60 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return int(module.main(args.args) or 0)
 
 
+def _json_dict(text: str) -> dict:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise argparse.ArgumentTypeError(f"not valid JSON: {err}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("expected a JSON object, e.g. '{\"horizon\": 10}'")
+    return value
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from .training import RunConfig, evaluate, train
+
+    config = RunConfig(env_id=args.env, observation_kind=args.estimator, algo=args.algo,
+                       steps=args.steps, seed=args.seed, n_envs=args.n_envs,
+                       observation=args.observation, estimator_kwargs=args.estimator_kwargs,
+                       env_kwargs=args.env_kwargs)
+    out = train(config, args.out, progress_bar=not args.no_progress)
+    result = evaluate(out, episodes=args.episodes)
+    print(f"{args.env} observing {args.estimator}: return {result.mean:.4g} ± {result.std:.3g} "
+          f"over {args.episodes} episodes; saved in {out}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .training import evaluate
+
+    result = evaluate(args.model, episodes=args.episodes, seed=args.seed)
+    print(f"return {result.mean:.4g} ± {result.std:.3g} over {args.episodes} episodes")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .training import compare_controllers, plot_learning_curves
+
+    kinds = [k.strip() for k in args.observations.split(",") if k.strip()]
+    seeds = list(range(args.seeds))
+    summary = compare_controllers(args.env, kinds, seeds, args.out, steps=args.steps,
+                                  algo=args.algo, episodes=args.episodes,
+                                  estimator_kwargs=args.estimator_kwargs,
+                                  env_kwargs=args.env_kwargs,
+                                  progress_bar=not args.no_progress)
+    rows = [[s["observation"], s["mean"], s["std"],
+             " ".join(f"{r:.4g}" for r in s["per_seed"])] for s in summary]
+    table = format_table(["observation", "mean return", "std over seeds", "per seed"], rows)
+    print(table)
+    Path(args.out, "comparison.md").write_text(
+        format_table(["observation", "mean return", "std over seeds", "per seed"], rows,
+                     markdown=True) + "\n")
+    plot = plot_learning_curves(args.out, kinds, seeds, Path(args.out, "learning_curves.png"))
+    print(f"wrote {Path(args.out, 'comparison.md')}" + (f" and {plot}" if plot else ""))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fir-gym",
@@ -86,6 +144,45 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=str, default=None, help="folder for Markdown reports")
     p.add_argument("--markdown", action="store_true", help="print Markdown tables")
     p.set_defaults(func=_cmd_reproduce)
+
+    p = sub.add_parser("train", help="train a controller with stable-baselines3")
+    p.add_argument("--env", required=True, help="environment id, e.g. fir_gym/VanDerPol-v0")
+    p.add_argument("--estimator", default="true",
+                   help="what the controller sees: 'true', 'measurement' or an estimator name")
+    p.add_argument("--observation", default="estimate",
+                   help="estimate | estimate+covariance | estimate+measurement")
+    p.add_argument("--algo", default="ppo", choices=["ppo", "sac"])
+    p.add_argument("--steps", type=int, default=50_000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-envs", type=int, default=4)
+    p.add_argument("--episodes", type=int, default=20, help="evaluation episodes")
+    p.add_argument("--estimator-kwargs", type=_json_dict, default={})
+    p.add_argument("--env-kwargs", type=_json_dict, default={})
+    p.add_argument("--out", required=True, help="folder for the model, statistics and logs")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("evaluate", help="evaluate a trained controller")
+    p.add_argument("--model", required=True, help="the folder `fir-gym train --out` wrote")
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--seed", type=int, default=10_000)
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("compare-controllers",
+                       help="train and compare controllers seeing different observations")
+    p.add_argument("--env", required=True)
+    p.add_argument("--observations", default="true,measurement,ekf",
+                   help="comma-separated: true, measurement and/or estimator names")
+    p.add_argument("--seeds", type=int, default=3, help="number of seeds per observation")
+    p.add_argument("--steps", type=int, default=50_000)
+    p.add_argument("--algo", default="ppo", choices=["ppo", "sac"])
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--estimator-kwargs", type=_json_dict, default={},
+                   help="JSON object: estimator name -> its options")
+    p.add_argument("--env-kwargs", type=_json_dict, default={})
+    p.add_argument("--out", required=True)
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("bench", help="run a speed benchmark")
     p.add_argument("name", choices=BENCHMARKS)
