@@ -34,10 +34,11 @@ from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
-from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._validation import as_covariance, as_vector
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
+
+from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._validation import as_covariance, as_vector
 
 FloatArray = NDArray[np.float64]
 
@@ -98,27 +99,42 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         self.state: FloatArray = self.initial_state.copy()
         self.time_step = 0
         self._last_obs = np.zeros(n_y)
+        self._last_extra: dict[str, Any] = {}
         self._model: StateSpaceModel | None = None
 
     # ------------------------------------------------------------------ to implement
-    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
-        """True next state from state ``x`` and normalised action ``a`` (draws noise)."""
+    # Every hook works on one system (x of shape (n_x,)) or on a batch (B, n_x): the
+    # single env and the native vector env (fir_gym.envs._vector) share them. ``k`` is
+    # the time index of ``x`` (an int, or a (B,) array), ``rng`` the generator to draw
+    # from; ``extra`` carries what a step computed that its measurement needs.
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
+        """True next state from ``x`` under the normalised action ``a`` (draws the noise)."""
         raise NotImplementedError
 
-    def _measure(self, x: FloatArray) -> FloatArray:
-        """Noisy measurement of the state reached at the current step."""
-        noise = self.np_random.standard_normal(self._measurement_sqrt.shape[1])
-        return self._noise_free_measurement(x) + self._measurement_sqrt @ noise
-
-    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
+        """The measurement without noise (``extra`` is None for the one ``reset`` returns)."""
         raise NotImplementedError
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        """The reward of the transition (a float, or a (B,) array)."""
         raise NotImplementedError
 
-    def _in_domain(self, x: FloatArray) -> bool:
-        """Whether ``x`` is inside the plant's physical domain (else the episode terminates)."""
-        return bool(np.all(np.isfinite(x)))
+    def _in_domain(self, x: FloatArray) -> Any:
+        """Whether ``x`` is inside the plant's physical domain (per row for a batch)."""
+        return np.all(np.isfinite(x), axis=-1)
+
+    def _measure(self, x: FloatArray, extra: dict[str, Any] | None,
+                 rng: np.random.Generator) -> FloatArray:
+        """Noisy measurement ``y = h(x) + v``, ``v ~ N(0, measurement_cov)``."""
+        sqrt = self._measurement_sqrt
+        noise = rng.standard_normal(x.shape[:-1] + (sqrt.shape[1],))
+        return self._noise_free_measurement(x, extra) + noise @ sqrt.T
+
+    def _sample_initial_state(self, rng: np.random.Generator, n: int | None = None) -> FloatArray:
+        """``initial_state + N(0, initial_state_cov)`` draws: one, or ``n`` of them."""
+        shape = (self._initial_sqrt.shape[1],) if n is None else (n, self._initial_sqrt.shape[1])
+        return self.initial_state + rng.standard_normal(shape) @ self._initial_sqrt.T
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         raise NotImplementedError
@@ -157,10 +173,10 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         if "state" in options:
             self.state = as_vector("options['state']", options["state"], len(self.state_names))
         else:
-            noise = self.np_random.standard_normal(self._initial_sqrt.shape[1])
-            self.state = self.initial_state + self._initial_sqrt @ noise
+            self.state = self._sample_initial_state(self.np_random)
         self.time_step = 0
-        self._last_obs = self._measure(self.state)
+        self._last_extra: dict[str, Any] = {}
+        self._last_obs = self._measure(self.state, None, self.np_random)
         return self._last_obs.copy(), {"state": self.state.copy()}
 
     def step(
@@ -168,15 +184,16 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     ) -> tuple[FloatArray, SupportsFloat, bool, bool, dict[str, Any]]:
         a, clipped = self._check_action(action)
         x = self.state
-        x_next = self._transition(x, a)
+        x_next, extra = self._transition(x, a, self.time_step, self.np_random)
         self.time_step += 1
-        terminated = not self._in_domain(x_next)
-        reward = self._reward(x, a, x_next)
+        terminated = not bool(self._in_domain(x_next))
+        reward = float(self._reward(x, a, x_next))
         self.state = x_next
+        self._last_extra = extra
         info: dict[str, Any] = {"state": x_next.copy(), "action": a.copy(),
-                                "action_clipped": clipped}
+                                "action_clipped": clipped, **extra}
         if np.all(np.isfinite(x_next)):
-            obs = self._measure(x_next)
+            obs = self._measure(x_next, extra, self.np_random)
         else:
             # A plant whose domain check is right never gets here; if parameters push
             # the state to overflow in one step, end the episode without handing NaN
@@ -184,7 +201,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
             obs, reward = self._last_obs.copy(), 0.0
             info["nonfinite_state"] = True
         self._last_obs = obs
-        return obs, float(reward), terminated, False, info
+        return obs, reward, terminated, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

@@ -7,9 +7,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
+
 from fir_gym.estimators import LinearModel, discretize_lti
 from fir_gym.estimators._validation import FloatArray, positive
-from numpy.typing import ArrayLike
 
 from . import _draw
 from ._base import PlantEnv, psd_sqrt
@@ -174,17 +175,17 @@ class CarrierMotionEnv(PlantEnv):
         self._process_sqrt = psd_sqrt(Q_d)
         # reward normaliser; a calm sea (q = 0) has no stationary spread, use 1
         self._sigma1 = float(np.sqrt(self.stationary_cov[0, 0])) or 1.0
-        self._offset = 0.0
 
-    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
-        self._offset = float(a[0]) * self.c_max
-        return self._A_d @ x + self._process_sqrt @ self.np_random.standard_normal(2)
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
+        x_next = x @ self._A_d.T + rng.standard_normal(x.shape) @ self._process_sqrt.T
+        return x_next, {"compensator_offset": a[..., 0] * self.c_max}
 
-    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
-        return self._C @ x
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
+        return x @ self._C.T
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        return -float(((x_next[0] - float(a[0]) * self.c_max) / self._sigma1) ** 2)
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        return -((x_next[..., 0] - a[..., 0] * self.c_max) / self._sigma1) ** 2
 
     def _build_model(self, params: Mapping[str, Any]) -> LinearModel:
         A_d, Q_d, C, R_d = carrier_discrete(params)
@@ -200,7 +201,8 @@ class CarrierMotionEnv(PlantEnv):
         hull_y = [heave, heave, heave - 0.35 * s, heave - 0.35 * s]
         canvas.polygon(hull_x, hull_y, _draw.INK)                             # hull
         canvas.rect(-1.4 * s, heave, 1.4 * s, heave + 0.06 * s, _draw.GREY)   # deck
-        c = float(np.clip(self._offset, -1.4 * s, 1.4 * s))
+        offset = float(self._last_extra.get("compensator_offset", 0.0))
+        c = float(np.clip(offset, -1.4 * s, 1.4 * s))
         canvas.line(1.6 * s, c, 1.9 * s, c, _draw.ACCENT, width=4.0)          # compensator
 
 

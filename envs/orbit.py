@@ -6,9 +6,10 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
+
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
-from numpy.typing import ArrayLike
 
 from . import _draw
 from ._base import PlantEnv, psd_sqrt
@@ -32,21 +33,28 @@ class OrbitDynamics:
 
     def propagate(self, x: FloatArray, u: FloatArray, jacobian: bool = False
                   ) -> tuple[FloatArray, FloatArray | None]:
-        r, v = x[..., 0].copy(), x[..., 1].copy()
-        a = u[..., 0] * self.thrust_max
+        """The interval map and, optionally, its Jacobian.
+
+        The loop runs on components, so one code path serves a single system (Python
+        floats: fast for the plant) and a batch (numpy arrays: the model, the vector env).
+        """
+        single = x.ndim == 1
+        r, v = (float(x[0]), float(x[1])) if single else (x[..., 0], x[..., 1])
+        a = (float(u[0]) if single else u[..., 0]) * self.thrust_max
         d, mu = self.euler_dt, self.mu
-        if jacobian:
-            J = np.zeros(x.shape[:-1] + (2, 2))
-            J[..., 0, 0] = J[..., 1, 1] = 1.0
+        j11, j12, j21, j22 = 1.0, 0.0, 0.0, 1.0
         for _ in range(self.substeps):
             if jacobian:
-                g = 2.0 * mu / r**3 * d            # ∂(-μ/r²)/∂r · Δ
-                # J ← (I + Δ [[0, 1], [2μ/r³, 0]]) J, row by row
-                J0 = J[..., 0, :] + d * J[..., 1, :]
-                J[..., 1, :] = J[..., 1, :] + g[..., None] * J[..., 0, :]
-                J[..., 0, :] = J0
+                # J ← (I + Δ [[0, 1], [2μ/r³, 0]]) J
+                g = 2.0 * mu / (r * r * r) * d
+                j11, j12, j21, j22 = j11 + d * j21, j12 + d * j22, j21 + g * j11, j22 + g * j12
             r, v = r + v * d, v + (a - mu / (r * r)) * d
-        return np.stack([r, v], axis=-1), (J if jacobian else None)
+        x_next = np.array([r, v]) if single else np.stack([r, v], axis=-1)
+        if not jacobian:
+            return x_next, None
+        J = np.stack([np.stack(np.broadcast_arrays(j11, j12), -1),
+                      np.stack(np.broadcast_arrays(j21, j22), -1)], -2)
+        return x_next, J
 
     def f(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.propagate(x, u)[0]
@@ -173,20 +181,22 @@ class OrbitEnv(PlantEnv):
                                        self.params["substeps"], self.params["thrust_max"])
         self._process_sqrt = psd_sqrt(self.params["Q"])
 
-    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
         x_next = self._dynamics.f(x, a)
         if np.any(self.params["Q"]):
-            x_next = x_next + self._process_sqrt @ self.np_random.standard_normal(2)
-        return x_next
+            x_next = x_next + rng.standard_normal(x.shape) @ self._process_sqrt.T
+        return x_next, {}
 
-    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return OrbitDynamics.h(x)
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        return -float((x_next[0] - self.r_ref) ** 2) - 0.01 * float(a[0] ** 2)
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        return -(x_next[..., 0] - self.r_ref) ** 2 - 0.01 * a[..., 0] ** 2
 
-    def _in_domain(self, x: FloatArray) -> bool:
-        return bool(np.all(np.isfinite(x)) and self.r_min < x[0] < self.r_max)
+    def _in_domain(self, x: FloatArray) -> Any:
+        r = x[..., 0]
+        return np.all(np.isfinite(x), axis=-1) & (self.r_min < r) & (r < self.r_max)
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = OrbitDynamics(positive("nominal mu", params["mu"]), params["euler_dt"],

@@ -6,9 +6,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
+
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
-from numpy.typing import ArrayLike
 
 from . import _draw
 from ._base import PlantEnv
@@ -44,8 +45,9 @@ class OscillatorDynamics:
         acc = -self.c * x1 - self.d * x2 * x3 + self.b + u[..., 0] * self.u_max
         return np.stack([x2, acc, np.zeros_like(x1)], axis=-1)
 
-    def step(self, x: FloatArray, u: FloatArray, delta: float = 0.0) -> FloatArray:
-        scale = np.array([1.0 + delta, 1.0 + delta, 1.0])
+    def step(self, x: FloatArray, u: FloatArray, delta: Any = 0.0) -> FloatArray:
+        """One transition; ``delta`` is a number or one δ per system of a batch."""
+        scale = 1.0 + np.asarray(delta, dtype=np.float64)[..., None] * np.array([1.0, 1.0, 0.0])
         if self.uncertainty == "state":
             return scale * x + self.rate(x, u) * self.dt
         return x + scale * self.rate(x, u) * self.dt
@@ -198,34 +200,34 @@ class UncertainOscillatorEnv(PlantEnv):
         self._dynamics = self._make_dynamics(self.params, uncertainty)
         self._noise_std = float(np.sqrt(self.params["Q"][0, 0]))
 
-    def delta(self, k: int) -> float:
-        """The true uncertainty δ_k applied in the transition from x[k] to x[k+1]."""
-        return float(sum(d for first, last, d in self.delta_schedule if first <= k <= last))
+    def delta(self, k: Any) -> Any:
+        """The true uncertainty δ_k of the transition from x[k] to x[k+1] (k: int or array)."""
+        k_ = np.asarray(k)
+        total = np.zeros(k_.shape)
+        for first, last, d in self.delta_schedule:
+            total = total + d * ((first <= k_) & (k_ <= last))
+        return float(total) if total.ndim == 0 else total
 
     @staticmethod
     def _make_dynamics(params: Mapping[str, Any], uncertainty: str) -> OscillatorDynamics:
         return OscillatorDynamics(params["dt"], params["stiffness"], params["damping_gain"],
                                   params["drive"], params["u_max"], uncertainty)
 
-    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
-        self._last_delta = self.delta(self.time_step)
-        x_next = self._dynamics.step(x, a, self._last_delta)
-        x_next[1] += self.params["dt"] * self._noise_std * self.np_random.standard_normal()
-        return x_next
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
+        delta = self.delta(k)
+        x_next = self._dynamics.step(x, a, delta)
+        x_next[..., 1] += self.params["dt"] * self._noise_std * rng.standard_normal(x.shape[:-1])
+        return x_next, {"delta": delta}
 
-    def step(self, action: ArrayLike) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = super().step(action)
-        info["delta"] = self._last_delta
-        return obs, reward, terminated, truncated, info
-
-    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return OscillatorDynamics.h(x)
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        return -float((x_next[0] - self.setpoint) ** 2) - 1e-3 * float(a[0] ** 2)
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        return -(x_next[..., 0] - self.setpoint) ** 2 - 1e-3 * a[..., 0] ** 2
 
-    def _in_domain(self, x: FloatArray) -> bool:
-        return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= self.state_bound))
+    def _in_domain(self, x: FloatArray) -> Any:
+        return np.all(np.isfinite(x) & (np.abs(x) <= self.state_bound), axis=-1)
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = self._make_dynamics(params, self.uncertainty)

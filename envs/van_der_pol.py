@@ -7,9 +7,10 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
+
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, positive
-from numpy.typing import ArrayLike
 
 from . import _draw
 from ._base import PlantEnv
@@ -59,7 +60,10 @@ class VanDerPolDynamics:
         x1, x2 = (float(x[0]), float(x[1])) if single else (x[..., 0], x[..., 1])
         force = float(u[0]) * self.u_max if single else u[..., 0] * self.u_max
         tau, eps, half = self.tau, self.epsilon, 0.5 * self.tau
-        noise = [0.0] * self.substeps if dW is None else dW.tolist()
+        if dW is None:
+            noise: list[Any] = [0.0] * self.substeps
+        else:  # floats for one system, (B,) rows for a batch
+            noise = dW.tolist() if single else list(dW)
         x1_sum = 0.5 * x1
         if jacobian:  # Φ = [[p11, p12], [p21, p22]], the product of Heun step Jacobians
             p11, p12, p21, p22 = 1.0, 0.0, 0.0, 1.0
@@ -231,7 +235,6 @@ class VanDerPolEnv(PlantEnv):
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"] / params["h"], render_mode=render_mode)
         self._dynamics = self._make_dynamics(self.params)
-        self._x1_average = float(self.initial_state[0])
         self._trail: list[tuple[float, float]] = []
 
     @staticmethod
@@ -247,29 +250,31 @@ class VanDerPolEnv(PlantEnv):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[FloatArray, dict[str, Any]]:
         self._trail = []
-        self._x1_average = None  # the first measurement is of x1(0) itself
         return super().reset(seed=seed, options=options)
 
-    def _transition(self, x: FloatArray, a: FloatArray) -> FloatArray:
-        dyn = self._dynamics
-        dW = np.sqrt(self.params["Q"] * dyn.tau) * self.np_random.standard_normal(dyn.substeps)
-        x_next, self._x1_average, _ = dyn.integrate(x, a, dW)
-        self._trail.append((float(x_next[0]), float(x_next[1])))
-        return x_next
-
     def step(self, action: ArrayLike) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = super().step(action)
-        info["x1_average"] = float(self._x1_average)
-        return obs, reward, terminated, truncated, info
+        out = super().step(action)
+        self._trail.append((float(self.state[0]), float(self.state[1])))
+        return out
 
-    def _noise_free_measurement(self, x: FloatArray) -> FloatArray:
-        return np.array([x[0] if self._x1_average is None else self._x1_average])
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
+        dyn = self._dynamics
+        dW = np.sqrt(self.params["Q"] * dyn.tau) * rng.standard_normal(
+            (dyn.substeps,) + x.shape[:-1])
+        x_next, x1_average, _ = dyn.integrate(x, a, dW)
+        return x_next, {"x1_average": x1_average}
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        return -0.25 * float(x_next @ x_next) - 0.01 * float(a[0] ** 2)
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
+        if extra is None:                        # the measurement reset returns: x1(0)
+            return x[..., :1].copy()
+        return np.asarray(extra["x1_average"], dtype=np.float64)[..., None]
 
-    def _in_domain(self, x: FloatArray) -> bool:
-        return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= self.state_bound))
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        return -0.25 * np.sum(x_next * x_next, axis=-1) - 0.01 * a[..., 0] ** 2
+
+    def _in_domain(self, x: FloatArray) -> Any:
+        return np.all(np.isfinite(x) & (np.abs(x) <= self.state_bound), axis=-1)
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = self._make_dynamics(params)
