@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from .wrappers.factory import plant_factory
+from .wrappers.factory import plant_factory, plant_vector_factory
 
 #: (id, entry-point name in this module, plant class, max_episode_steps)
 _SPECS: tuple[tuple[str, str, str, int], ...] = (
@@ -25,10 +25,11 @@ _SPECS: tuple[tuple[str, str, str, int], ...] = (
 #: Every environment id that ``import fir_gym`` registers.
 ENV_IDS: tuple[str, ...] = tuple(spec[0] for spec in _SPECS)
 
-# One module attribute per plant (``orbit``, ``van_der_pol``, ...), so that each
+# Module attributes per plant (``orbit`` and ``orbit_vector``, ...), so that each
 # registered entry point is a plain string "fir_gym._registration:<name>".
 for _env_id, _name, _plant, _steps in _SPECS:
     globals()[_name] = plant_factory(_plant)
+    globals()[_name + "_vector"] = plant_vector_factory(_plant)
 
 
 def register_envs() -> None:
@@ -37,4 +38,5 @@ def register_envs() -> None:
         if env_id in gym.registry:
             continue
         gym.register(id=env_id, entry_point=f"fir_gym._registration:{name}",
+                     vector_entry_point=f"fir_gym._registration:{name}_vector",
                      max_episode_steps=max_steps)

@@ -73,3 +73,20 @@ def plant_factory(plant: str) -> Callable[..., gym.Env]:
 
     make.__doc__ = f"Build {plant} with optional estimator/observation options (see make_plant)."
     return make
+
+
+def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
+    """A ``vector_entry_point`` for ``plant``: a :class:`~fir_gym.envs._vector.PlantVectorEnv`."""
+
+    def make_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+        from fir_gym.envs._vector import PlantVectorEnv
+
+        for key in ("estimator", "estimator_kwargs", "observation"):
+            if kwargs.get(key) is not None:
+                raise ValueError(f"{key} is not an option of the native vector env; wrap it in "
+                                 "fir_gym.wrappers.VectorEstimatorObservation instead")
+            kwargs.pop(key, None)
+        return PlantVectorEnv(load_env_creator(plant), num_envs=num_envs, **kwargs)
+
+    make_vector.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
+    return make_vector

@@ -5,9 +5,10 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 import scipy.signal
-from fir_gym.estimators import discretize_lti, linear_model_from_continuous
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from fir_gym.estimators import discretize_lti, linear_model_from_continuous
 
 
 def random_system(seed, n=3, m=2, q=2):

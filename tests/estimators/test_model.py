@@ -4,10 +4,11 @@ import pickle
 
 import numpy as np
 import pytest
-from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearModel
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+
+from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearModel
 
 
 class Pendulum:
