@@ -30,6 +30,7 @@ keeps its last finite estimate (and covariance), so NaN never reaches a caller.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -140,15 +141,17 @@ class Estimator(ABC):
             Y = Y.reshape(1, n_y) if single else Y
         if self._x is None or Y.shape[0] != self._x.shape[0] or single != self._single:
             self._ensure_batch(Y.shape[0], single)
-        if np.isfinite(Y).all():
-            valid = self._all_valid
-        else:
+        valid = self._all_valid
+        if not math.isfinite(Y.sum()):
+            valid = np.all(np.isfinite(Y), axis=1)
+            if valid.all():             # the sum overflowed; every value is finite
+                valid = self._all_valid
+        if valid is not self._all_valid:
             if self.nan_policy == "raise":
                 raise ValueError(
                     "y must be finite (nan_policy='raise'); got NaN or inf in the measurement. "
                     "Pass nan_policy='skip' to treat it as missing."
                 )
-            valid = np.all(np.isfinite(Y), axis=1)
             Y = np.where(valid[:, None], Y, 0.0)
         U = self._no_input if u is None else self._check_u(u, Y.shape[0])
         with np.errstate(all="ignore"):
@@ -187,7 +190,7 @@ class Estimator(ABC):
         return self._k
 
     # ------------------------------------------------------------------ to implement
-    def _reset_state(self) -> None:
+    def _reset_state(self) -> None:  # noqa: B027 (optional hook)
         """Hook for subclasses to clear their own state on ``reset``."""
 
     @abstractmethod
@@ -207,7 +210,8 @@ class Estimator(ABC):
     def _ensure_batch(self, n_batch: int, single: bool) -> None:
         if self._x is not None:
             if n_batch != self._x.shape[0] or single != self._single:
-                want = f"({self.model.n_y},)" if self._single else f"({self._x.shape[0]}, {self.model.n_y})"
+                n_y = self.model.n_y
+                want = f"({n_y},)" if self._single else f"({self._x.shape[0]}, {n_y})"
                 raise ValueError(f"y must have shape {want} like the earlier measurements; "
                                  f"got a batch of {n_batch}")
             return
@@ -227,7 +231,7 @@ class Estimator(ABC):
         self._no_input.setflags(write=False)
         self._init_batch(n_batch)
 
-    def _init_batch(self, n_batch: int) -> None:
+    def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
         """Hook: allocate per-system state once the batch size is known."""
 
     def _check_u(self, u: ArrayLike, n_batch: int) -> FloatArray:
@@ -255,7 +259,7 @@ class Estimator(ABC):
         masks computed.
         """
         n = x.shape[1]
-        fine = bool(np.isfinite(x.sum()))
+        fine = math.isfinite(x.sum())
         if fine and P is not None:
             fine = bool(abs(P).max() * n <= self.max_covariance_trace)
         if fine and nis is not None and (self._nis_running or not nis.max() <= self._nis_threshold):

@@ -1,0 +1,373 @@
+"""Kalman filter and the linearised Kalman filter of paper 000, over batched pure functions.
+
+The two pure functions are the textbook recursion (e.g. Simon, *Optimal State
+Estimation*, 2006, eqs 5.17–5.19), batched over a leading axis:
+
+    predict   x⁻ = F x + B u,                 P⁻ = F P Fᵀ + Q
+    update    e = y − H x⁻,  S = H P⁻ Hᵀ + R,  K = P⁻ Hᵀ S⁻¹,
+              x⁺ = x⁻ + K e,
+              P⁺ = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ          (Joseph form)
+
+``S⁻¹`` is never formed by ``inv``: ``K`` and the normalised innovation squared
+``NIS = eᵀ S⁻¹ e`` come from a Cholesky factorisation of ``S`` (closed form for
+``n_y <= 3``, vectorised over the batch). The Joseph form keeps ``P⁺``
+positive semi-definite for any gain; the result is symmetrised.
+
+:class:`KalmanFilter` reads ``model.matrices(k)``; :class:`LinearizedKalmanFilter`
+is paper 000's LKF (Section 4, the "LKF" of Table 1): it linearises along a
+nominal trajectory run open loop from the filter's initial state.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._kalman_linalg import constant_or_batch, eye, rmul, spd_inverse, symmetrize
+from ._validation import FloatArray
+from .base import Estimator
+from .model import StateSpaceModel
+from .registry import register_estimator
+
+__all__ = ["Innovation", "KalmanFilter", "LinearizedKalmanFilter", "kf_predict", "kf_update"]
+
+
+class Innovation(NamedTuple):
+    """Innovation statistics of one measurement update (batched like the state).
+
+    Attributes:
+        e: innovation ``y − ŷ`` (``(n_y,)`` or ``(B, n_y)``).
+        S: innovation covariance ``H P⁻ Hᵀ + R``.
+        nis: normalised innovation squared ``eᵀ S⁻¹ e`` (a float or ``(B,)``),
+            χ²-distributed with ``n_y`` degrees of freedom for a consistent filter.
+    """
+
+    e: FloatArray
+    S: FloatArray
+    nis: FloatArray
+
+
+# ---------------------------------------------------------------------------- kernels
+def predict_covariance(P: FloatArray, F: FloatArray, Q: FloatArray) -> FloatArray:
+    """Batched ``P⁻ = F P Fᵀ + Q`` (symmetrised); ``F`` 2-D (shared) or batched."""
+    F = constant_or_batch(F)
+    if F.ndim == 2:
+        Ft = F.T
+        P = rmul(rmul(P, Ft).mT, Ft) + Q      # (F (F P)ᵀ)ᵀ = F P Fᵀ for symmetric P
+    else:
+        P = F @ P @ F.mT + Q
+    return symmetrize(P)
+
+
+def predict_kernel(x: FloatArray, P: FloatArray, F: FloatArray, Q: FloatArray,
+                   Bu: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """Batched ``x⁻ = F x (+ B u)``, ``P⁻ = F P Fᵀ + Q``; no validation. ``F`` 2-D or 3-D."""
+    F = constant_or_batch(F)
+    x = rmul(x, F.T) if F.ndim == 2 else (F @ x[:, :, None])[:, :, 0]
+    if Bu is not None:
+        x = x + Bu
+    return x, predict_covariance(P, F, Q)
+
+
+def gain_kernel(P: FloatArray, H: FloatArray, R: FloatArray
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Covariance half of the update: ``K = P Hᵀ S⁻¹`` and the Joseph-form ``P⁺``.
+
+    Returns ``(K, W, P⁺)`` with ``W = S⁻¹`` (for the NIS). ``H`` and ``R`` are
+    2-D (shared) or batched; ``P`` may be a batch of one shared by many systems.
+    """
+    n = P.shape[1]
+    if H.ndim == 2:
+        PHt = rmul(P, H.T)                              # (B, n, m)
+        S = rmul(PHt.mT, H.T) + R                       # H P Hᵀ + R (P symmetric)
+    else:
+        PHt = P @ H.mT
+        S = H @ PHt + R
+    W = spd_inverse(S)
+    K = PHt @ W
+    IKH = eye(n) - (rmul(K, H) if H.ndim == 2 else K @ H)
+    KR = rmul(K, R) if R.ndim == 2 else K @ R
+    return K, W, symmetrize(IKH @ P @ IKH.mT + KR @ K.mT)
+
+
+def correct(x: FloatArray, e: FloatArray, K: FloatArray, W: FloatArray
+            ) -> tuple[FloatArray, FloatArray]:
+    """State half of the update: ``x⁺ = x + K e``, ``NIS = eᵀ W e`` (``K, W`` shared or not)."""
+    if K.shape[0] == 1:
+        x_new = x + np.dot(e, K[0].T)
+        We = np.dot(e, W[0])
+    else:
+        x_new = x + (K @ e[:, :, None])[:, :, 0]
+        We = (W @ e[:, :, None])[:, :, 0]
+    return x_new, (We * e).sum(axis=1)
+
+
+def update_kernel(x: FloatArray, P: FloatArray, e: FloatArray, H: FloatArray, R: FloatArray,
+                  valid: np.ndarray | None = None
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Batched Joseph-form update given the innovation ``e``; returns ``x⁺, P⁺, S⁻¹, nis``.
+
+    ``H`` is ``(m, n)`` or ``(B, m, n)``; ``R`` is ``(m, m)`` or ``(B, m, m)``.
+    A system whose ``S`` is not positive definite gets NaN (its caller flags it).
+    Systems with ``valid`` False keep ``x, P`` (their ``nis`` is NaN).
+    """
+    K, W, P_new = gain_kernel(P, constant_or_batch(H), constant_or_batch(R))
+    x_new, nis = correct(x, e, K, W)
+    if valid is not None and not valid.all():
+        x_new = np.where(valid[:, None], x_new, x)
+        P_new = np.where(valid[:, None, None], P_new, P)
+        nis = np.where(valid, nis, np.nan)
+    return x_new, P_new, W, nis
+
+
+# ---------------------------------------------------------------------------- pure functions
+def _batch_args(x: ArrayLike, P: ArrayLike) -> tuple[FloatArray, FloatArray, bool]:
+    x_ = np.asarray(x, dtype=np.float64)
+    P_ = np.asarray(P, dtype=np.float64)
+    if x_.ndim not in (1, 2):
+        raise ValueError(f"x must have shape (n,) or (B, n); got shape {x_.shape}")
+    n = x_.shape[-1]
+    if P_.shape[-2:] != (n, n) or P_.ndim not in (2, 3) or P_.ndim - x_.ndim != 1 or (
+            P_.ndim == 3 and P_.shape[0] != x_.shape[0]):
+        want = f"({n}, {n})" if x_.ndim == 1 else f"({x_.shape[0]}, {n}, {n})"
+        raise ValueError(f"P must have shape {want} to match x; got shape {P_.shape}")
+    single = x_.ndim == 1
+    return (x_[None], P_[None], True) if single else (x_, P_, False)
+
+
+def _matrix_arg(name: str, M: ArrayLike | None, shape: tuple[int, int], n_b: int,
+                single: bool) -> FloatArray:
+    M_ = np.asarray(M, dtype=np.float64)
+    if M_.ndim == 0 and shape == (1, 1):
+        M_ = M_.reshape(1, 1)
+    if M_.shape == shape or (not single and M_.shape == (n_b, *shape)):
+        return M_
+    batched = "" if single else f" or ({n_b}, {shape[0]}, {shape[1]})"
+    raise ValueError(f"{name} must have shape {shape}{batched}; got shape {M_.shape}")
+
+
+def kf_predict(x: ArrayLike, P: ArrayLike, F: ArrayLike, Q: ArrayLike,
+               B: ArrayLike | None = None, u: ArrayLike | None = None
+               ) -> tuple[FloatArray, FloatArray]:
+    """Kalman prediction ``x⁻ = F x + B u``, ``P⁻ = F P Fᵀ + Q`` (symmetrised).
+
+    Args:
+        x: ``(n,)`` or ``(B, n)``. P: ``(n, n)`` or ``(B, n, n)``.
+        F: ``(n, n)``, or ``(B, n, n)`` for a batch. Q: the state noise
+            covariance ``G Q Gᵀ`` as an ``(n, n)`` (or batched) matrix.
+        B, u: optional input matrix ``(n, n_u)`` and input ``(n_u,)``/``(B, n_u)``.
+
+    Returns:
+        ``(x⁻, P⁻)`` with the shapes of ``x`` and ``P``.
+    """
+    x_, P_, single = _batch_args(x, P)
+    n_b, n = x_.shape
+    F_ = _matrix_arg("F", F, (n, n), n_b, single)
+    Q_ = _matrix_arg("Q", Q, (n, n), n_b, single)
+    Bu = None
+    if (B is None) != (u is None):
+        raise ValueError("B and u must be given together")
+    if B is not None:
+        B_ = np.asarray(B, dtype=np.float64).reshape(n, -1)
+        u_ = np.asarray(u, dtype=np.float64).reshape(-1, B_.shape[1])
+        Bu = rmul(u_, B_.T)
+    x_new, P_new = predict_kernel(x_, P_, F_, Q_, Bu)
+    return (x_new[0], P_new[0]) if single else (x_new, P_new)
+
+
+def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLike
+              ) -> tuple[FloatArray, FloatArray, Innovation]:
+    """Joseph-form Kalman measurement update; returns ``(x⁺, P⁺, Innovation(e, S, nis))``.
+
+    Args:
+        x: prior mean ``(n,)`` or ``(B, n)``. P: prior covariance.
+        y: measurement ``(m,)`` or ``(B, m)``.
+        H: ``(m, n)`` or ``(B, m, n)``. R: ``(m, m)`` or ``(B, m, m)``.
+
+    Raises:
+        ValueError: on a shape mismatch, or when ``S = H P Hᵀ + R`` is not
+            positive definite for some system.
+    """
+    x_, P_, single = _batch_args(x, P)
+    n_b, n = x_.shape
+    y_ = np.asarray(y, dtype=np.float64)
+    H_ = np.asarray(H, dtype=np.float64)
+    m = H_.shape[-2] if H_.ndim >= 2 else -1
+    if y_.shape != ((m,) if single else (n_b, m)):
+        raise ValueError(f"y must have shape ({m},) to match H" if single else
+                         f"y must have shape ({n_b}, {m}) to match x and H; got {y_.shape}")
+    H_ = _matrix_arg("H", H_, (m, n), n_b, single)
+    R_ = _matrix_arg("R", R, (m, m), n_b, single)
+    Y = y_[None] if single else y_
+    e = Y - (rmul(x_, H_.T) if H_.ndim == 2 else (H_ @ x_[:, :, None])[:, :, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x_new, P_new, _, nis = update_kernel(x_, P_, e, H_, R_)
+    S = (H_ @ P_ @ H_.mT if H_.ndim == 3 else H_ @ P_ @ H_.T) + R_
+    bad = ~np.isfinite(nis)
+    if bad.any():
+        raise ValueError(f"S = H P Hᵀ + R is not positive definite for system(s) "
+                         f"{np.flatnonzero(bad).tolist()}")
+    if single:
+        return x_new[0], P_new[0], Innovation(e[0], S[0], nis[0])
+    return x_new, P_new, Innovation(e, S, nis)
+
+
+# ---------------------------------------------------------------------------- filters
+class KalmanFilter(Estimator):
+    """Linear Kalman filter on a :class:`LinearModel` or :class:`TimeVaryingLinearModel`.
+
+    Convention for time-varying models (ARCHITECTURE.md): the prediction
+    ``x[k-1] → x[k]`` uses ``A, B, G, Q`` of ``model.matrices(k-1)``; the update
+    at ``k`` uses ``C, R`` of ``model.matrices(k)``. Options are those of
+    :class:`~fir_gym.estimators.base.Estimator` (``nan_policy``, divergence limits).
+
+    Two exact shortcuts, both because the covariance recursion of a linear
+    model does not depend on the data:
+
+    * **shared covariance** — systems of a batch started from one unbatched
+      ``P0`` and always updated together have the same ``P``; it is computed once
+      and broadcast (a read-only view), so a batch costs one covariance update
+      plus the state updates;
+    * **steady state** — for a time-invariant model, once a step maps ``P`` to
+      itself up to round-off (``max|ΔP| <= 4 eps max|P|``; the recursion then only
+      wanders by a few ulps, often in a cycle, never settling bit for bit), the
+      ``P⁺``, ``K`` and ``S⁻¹`` of that step are kept and only the state is
+      updated. Estimates differ from the full recursion at the round-off level
+      (about 1e-16 relative). A skipped measurement, a divergence repair or
+      ``reset`` leaves that regime.
+    """
+
+    name = "kf"
+
+    def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
+                 P0: ArrayLike | None = None, **options: Any) -> None:
+        if not getattr(model, "is_linear", False) or not hasattr(model, "matrices"):
+            raise TypeError(f"model must be a LinearModel or TimeVaryingLinearModel for "
+                            f"{type(self).__name__}; got {type(model).__name__} "
+                            f"(use ExtendedKalmanFilter or UnscentedKalmanFilter)")
+        self._constant = getattr(model, "time_invariant", True)
+        if self._constant:
+            self._mats = self._prepare(model.matrices(0))
+        super().__init__(model, x0=x0, P0=P0, **options)
+
+    @staticmethod
+    def _prepare(mats: Any) -> tuple[FloatArray | None, ...]:
+        A, B, C, G, Q, R = mats
+        return (np.ascontiguousarray(A.T), np.ascontiguousarray(B.T) if B.shape[1] else None,
+                C, np.ascontiguousarray(C.T), G @ Q @ G.T, R)
+
+    def _matrices(self, k: int) -> tuple[Any, ...]:
+        return self._mats if self._constant else self._prepare(self.model.matrices(k))
+
+    def _reset_state(self) -> None:
+        self._steady: tuple[FloatArray, ...] | None = None
+
+    def _init_batch(self, n_batch: int) -> None:
+        if self._P0.ndim == 2 and n_batch > 1:        # one covariance for the whole batch
+            self._P = np.broadcast_to(self._P0, (n_batch, *self._P0.shape))
+
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return self._correct(x, P, y, valid, self._matrices(0))[:3]
+
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        At, Bt, _, _, Qd, _ = self._matrices(self._k - 1)
+        x = rmul(x, At)
+        if Bt is not None:
+            x = x + rmul(u, Bt)
+        steady = self._steady
+        if steady is not None and P is steady[0] and valid is self._all_valid:
+            P_new, K, W, Ct = steady
+            x, nis = correct(x, y - rmul(x, Ct), K, W)
+            return x, P_new, nis
+        self._steady = None
+        if P.strides[0] == 0 and valid is self._all_valid:
+            P = P[:1]                                   # shared covariance
+        P_pred = predict_covariance(P, At.T, Qd)       # A P Aᵀ + G Q Gᵀ
+        mats = self._matrices(self._k)
+        x_new, P_new, nis, K, W = self._correct(x, P_pred, y, valid, mats)
+        if K is not None and self._constant and _converged(P_new, P):
+            self._steady = (P_new, K, W, mats[3])
+        return x_new, P_new, nis
+
+    def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
+                 mats: tuple[Any, ...]) -> tuple[Any, ...]:
+        _, _, C, Ct, _, R = mats
+        e = y - rmul(x, Ct)
+        if valid is not self._all_valid:
+            if P.strides[0] == 0 or P.shape[0] != x.shape[0]:
+                P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+            x_new, P_new, _, nis = update_kernel(x, P, e, C, R, valid)
+            return x_new, P_new, nis, None, None
+        K, W, P_new = gain_kernel(P, C, R)
+        x_new, nis = correct(x, e, K, W)
+        if P_new.shape[0] != x.shape[0]:
+            P_new = np.broadcast_to(P_new, (x.shape[0], *P_new.shape[1:]))
+        return x_new, P_new, nis, K, W
+
+
+def _converged(P_new: FloatArray, P: FloatArray) -> bool:
+    """Whether the Riccati recursion has reached round-off: ``max|ΔP| <= 4 eps max|P|``."""
+    if P.shape[0] == 1 or P.strides[0] == 0:
+        P_new, P = P_new[:1], P[:1]
+    scale = float(np.abs(P).max())
+    return float(np.abs(P_new - P).max()) <= 4.0 * _EPS * scale
+
+
+_EPS = float(np.finfo(np.float64).eps)
+
+
+class LinearizedKalmanFilter(Estimator):
+    """Paper 000's linearised Kalman filter (LKF): a KF on the perturbation about a nominal path.
+
+    The nominal trajectory starts at the filter's initial state and runs open
+    loop with the inputs the filter is given, ``x_nom[k] = f(x_nom[k-1], u[k-1])``,
+    ``x_nom[0] = x0``. The perturbation ``δx = x − x_nom`` follows
+    ``δx[k] = F(x_nom[k-1], u[k-1]) δx[k-1] + G w``,
+    ``y[k] − h(x_nom[k]) = H(x_nom[k]) δx[k] + v`` (paper 000, Section 2), and the
+    estimate is ``x̂ = x_nom + δx̂``. Unlike the EKF the linearisation point never
+    sees the measurements, so the LKF is exact on linear models and degrades as
+    the truth leaves the nominal path.
+    """
+
+    name = "lkf"
+
+    def _init_batch(self, n_batch: int) -> None:
+        self._x_nom = self._x.copy()
+
+    def _reset_state(self) -> None:
+        self._x_nom = None
+        self._GQGt = self.model.GQGT
+
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return self._correct(x - self._x_nom, P, y, valid)
+
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        model = self.model
+        F = model.F(self._x_nom, u)
+        dx, P = predict_kernel(x - self._x_nom, P, F, self._GQGt)
+        self._x_nom = model.f(self._x_nom, u)
+        return self._correct(dx, P, y, valid)
+
+    def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        H = self.model.H(self._x_nom)
+        e = y - self.model.h(self._x_nom) - (H @ dx[:, :, None])[:, :, 0]
+        dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
+        return self._x_nom + dx, P, nis
+
+    @property
+    def x_nominal(self) -> FloatArray | None:
+        """The nominal trajectory's current point (``None`` before the first step)."""
+        if self._x_nom is None:
+            return None
+        return self._x_nom[0].copy() if self._single else self._x_nom.copy()
+
+
+register_estimator("kf", KalmanFilter)
+register_estimator("lkf", LinearizedKalmanFilter)

@@ -1,0 +1,316 @@
+"""Unscented Kalman filter with pluggable sigma-point schemes (paper 003, Section 3).
+
+**Scaled unscented transform** (paper 003, Table 1 and eq 6; Julier 2002; Wan &
+van der Merwe 2000): for a state of dimension ``n``,
+
+    λ = α² (n + κ) − n
+    χ₀ = x,   χᵢ = x + (√((n+λ) P))ᵢ,   χᵢ₊ₙ = x − (√((n+λ) P))ᵢ      (i = 1..n)
+    W₀ᵐ = λ / (n + λ),   W₀ᶜ = λ / (n + λ) + 1 − α² + β,   Wᵢᵐ = Wᵢᶜ = 1 / (2 (n + λ))
+
+with ``√`` the lower Cholesky factor (columns). Paper 003 prints the weight as
+``1/2(n+l)`` (read ``1/(2(n+λ))``); its eq 9 drops the outer product —
+the covariance is ``Σ Wᵢᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ`` — and its Table 2 drops ``+ Q`` in
+``P⁻`` and ``+ R`` in ``Pᶻᶻ``; all three are restored here.
+
+**Defaults** ``α = 1e-3, β = 2, κ = 0``: paper 003 gives the range
+``1e-3 ≤ α ≤ 1`` (printed reversed), says κ is "mostly 0" and that β = 2 is
+optimal for Gaussian priors, but not the values it used; these are Wan & van der
+Merwe's standard values, which fit that description.
+
+**Numerics.** With small α the weights are huge and of mixed sign
+(``W₀ᵐ ≈ −1/α²``), and the textbook sums lose up to ``1/α²`` in relative
+accuracy. :func:`unscented_transform` therefore works with deviations from the
+first point, ``Dᵢ = Zᵢ − Z₀``: ``z̄ = Z₀ + Σ Wᵢᵐ Dᵢ`` and
+``Σ Wᵢᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ = Σ Wᵢᶜ Dᵢ Dᵢᵀ − d cᵀ − c dᵀ + (Σ Wᶜ) d dᵀ`` with
+``d = Σ Wᵐ D``, ``c = Σ Wᶜ D`` — algebraically identical, but ``W₀`` multiplies
+``D₀ = 0``; for the scaled set it reduces to ``Σᵢ>₀ Wᵢ Dᵢ Dᵢᵀ + (β − α²) d dᵀ``,
+a sum of positive terms.
+
+**Non-positive-definite covariance.** Sigma points need a square root of ``P``.
+When the Cholesky factorisation fails, a positive *semi*-definite ``P`` (smallest
+eigenvalue ≥ ``−1e-9 · max eigenvalue``, e.g. a state known exactly) uses the
+symmetric eigen-square-root with the negative round-off clipped; an indefinite
+``P`` is an error: :meth:`SigmaPoints.sigma_points` raises ``ValueError``, and the
+filter flags that system as diverged (it keeps its last finite estimate). The
+opt-in ``jitter`` adds ``jitter · max(diag P) · I`` before every factorisation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
+from ._validation import FloatArray
+from .base import Estimator
+from .extended import model_callables
+from .model import StateSpaceModel
+from .registry import register_estimator
+
+__all__ = ["CubatureSigmaPoints", "MerweScaledSigmaPoints", "SigmaPoints",
+           "UnscentedKalmanFilter", "matrix_sqrt", "unscented_transform"]
+
+#: relative tolerance below which negative eigenvalues count as round-off
+PSD_TOL = 1e-9
+
+
+def matrix_sqrt(P: FloatArray, jitter: float = 0.0) -> FloatArray:
+    """A batch of square roots ``S Sᵀ = P`` (lower Cholesky where possible); NaN if indefinite."""
+    if jitter:
+        scale = np.max(np.diagonal(P, axis1=-2, axis2=-1), axis=-1)
+        P = P + (jitter * scale)[:, None, None] * np.eye(P.shape[-1])
+    L = cholesky(P)
+    bad = np.isnan(L[:, 0, 0]) if L.shape[1] == 1 else ~np.isfinite(L).all(axis=(1, 2))
+    if bad.any():
+        for b in np.flatnonzero(bad):
+            if not np.isfinite(P[b]).all():
+                continue
+            lam, V = np.linalg.eigh(P[b])
+            if lam[0] >= -PSD_TOL * max(lam[-1], 0.0):
+                L[b] = V * np.sqrt(np.clip(lam, 0.0, None))
+    return L
+
+
+class SigmaPoints:
+    """A sigma-point scheme: unit points ``ξ`` (N, n) and weights ``Wm, Wc`` (N,).
+
+    The points for mean ``x`` and covariance ``P = S Sᵀ`` are ``χᵢ = x + S ξᵢ``.
+    Subclasses set ``xi``, ``Wm`` and ``Wc``; any scheme whose weights satisfy
+    ``Σ Wm = 1``, ``Σ Wm ξ = 0`` and ``Σ Wc ξ ξᵀ = I`` plugs into the UKF.
+    """
+
+    n: int
+    xi: FloatArray
+    Wm: FloatArray
+    Wc: FloatArray
+
+    @property
+    def num_points(self) -> int:
+        """Number of sigma points ``N``."""
+        return int(self.Wm.shape[0])
+
+    def points(self, x: FloatArray, S: FloatArray) -> FloatArray:
+        """Sigma points ``(B, N, n)`` for means ``x (B, n)`` and square roots ``S (B, n, n)``."""
+        return x[:, None, :] + rmul(S, self.xi.T).mT
+
+    def sigma_points(self, x: ArrayLike, P: ArrayLike) -> FloatArray:
+        """Sigma points ``(N, n)``/``(B, N, n)`` for ``x`` ``(n,)``/``(B, n)`` and covariance ``P``.
+
+        Raises ``ValueError`` when ``P`` is not positive semi-definite.
+        """
+        x_ = np.asarray(x, dtype=np.float64)
+        single = x_.ndim == 1
+        X, P_ = (x_[None], np.asarray(P, float)[None]) if single else (x_, np.asarray(P, float))
+        if X.shape[-1] != self.n or P_.shape != (X.shape[0], self.n, self.n):
+            raise ValueError(f"x and P must have shapes (n,), (n, n) with n = {self.n} "
+                             f"(or a batch); got {x_.shape} and {np.shape(P)}")
+        with np.errstate(invalid="ignore"):
+            S = matrix_sqrt(P_)
+        if not np.isfinite(S).all():
+            raise ValueError("P must be symmetric positive semi-definite to draw sigma points")
+        out = self.points(X, S)
+        return out[0] if single else out
+
+    def _finish(self) -> None:
+        for a in (self.xi, self.Wm, self.Wc):
+            a.setflags(write=False)
+        #: Wc equals Wm except possibly at the first point (then c = d below)
+        self.same_tail = bool(np.array_equal(self.Wm[1:], self.Wc[1:]))
+        self.sum_Wc = float(self.Wc.sum())
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(n={self.n})"
+
+
+class MerweScaledSigmaPoints(SigmaPoints):
+    """Scaled sigma points (paper 003, Table 1 and eq 6): ``2n + 1`` points.
+
+    Args:
+        n: state dimension.
+        alpha: spread, ``0 < α ≤ 1`` (default 1e-3).
+        beta: prior-knowledge term, 2 for Gaussian priors (default 2).
+        kappa: secondary scaling (default 0); ``n + κ > 0`` is required.
+    """
+
+    def __init__(self, n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0
+                 ) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer; got {n!r}")
+        if not np.isfinite(alpha) or alpha <= 0:
+            raise ValueError(f"alpha must be positive; got {alpha!r}")
+        if not np.isfinite(beta) or not np.isfinite(kappa) or n + kappa <= 0:
+            raise ValueError(f"beta must be finite and n + kappa > 0; got beta={beta!r}, "
+                             f"kappa={kappa!r}, n={n}")
+        self.n, self.alpha, self.beta, self.kappa = int(n), float(alpha), float(beta), float(kappa)
+        self.lam = alpha**2 * (n + kappa) - n
+        c = n + self.lam
+        self.xi = np.vstack([np.zeros(n), np.sqrt(c) * np.eye(n), -np.sqrt(c) * np.eye(n)])
+        self.Wm = np.full(2 * n + 1, 0.5 / c)
+        self.Wc = self.Wm.copy()
+        self.Wm[0] = self.lam / c
+        self.Wc[0] = self.lam / c + 1.0 - alpha**2 + beta
+        self._finish()
+
+    def __repr__(self) -> str:
+        return (f"MerweScaledSigmaPoints(n={self.n}, alpha={self.alpha:g}, beta={self.beta:g}, "
+                f"kappa={self.kappa:g})")
+
+
+class CubatureSigmaPoints(SigmaPoints):
+    """Spherical-radial cubature points (Arasaratnam & Haykin 2009).
+
+    ``2n`` points ``±√n eᵢ``, all weights ``1/(2n)``.
+    """
+
+    def __init__(self, n: int) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer; got {n!r}")
+        self.n = int(n)
+        self.xi = np.sqrt(n) * np.vstack([np.eye(n), -np.eye(n)])
+        self.Wm = np.full(2 * n, 0.5 / n)
+        self.Wc = self.Wm.copy()
+        self._finish()
+
+
+def _moments(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                      FloatArray]:
+    """Mean, deviations ``D = Z − Z₀``, ``d = Σ Wm D`` and ``c = Σ Wc D`` of ``Z (B, N, k)``."""
+    D = Z - Z[:, :1]
+    d = np.matmul(sp.Wm, D)                             # (B, k)
+    c = d if sp.same_tail else np.matmul(sp.Wc, D)
+    return Z[:, 0] + d, D, d, c
+
+
+def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
+    return a[:, :, None] * b[:, None, :]
+
+
+def _cross(Da: FloatArray, da: FloatArray, ca: FloatArray, Db: FloatArray, db: FloatArray,
+           cb: FloatArray, sp: SigmaPoints) -> FloatArray:
+    """``Σ Wc (Aᵢ − ā)(Bᵢ − b̄)ᵀ`` from deviations (see the module docstring)."""
+    C = (Da * sp.Wc[:, None]).mT @ Db
+    if sp.same_tail:
+        return C + (sp.sum_Wc - 2.0) * _outer(da, db)
+    return C - _outer(da, cb) - _outer(ca, db) + sp.sum_Wc * _outer(da, db)
+
+
+def unscented_transform(Z: ArrayLike, Wm: ArrayLike | SigmaPoints, Wc: ArrayLike | None = None,
+                        noise_cov: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+    """Mean and covariance of transformed sigma points (paper 003, eqs 8–9, corrected).
+
+    Args:
+        Z: transformed points ``(N, k)`` or ``(B, N, k)``.
+        Wm: mean weights ``(N,)``, or a :class:`SigmaPoints` (then ``Wc`` is omitted).
+        Wc: covariance weights ``(N,)``.
+        noise_cov: additive noise covariance ``(k, k)`` (``Q`` or ``R``), added to the result.
+
+    Returns:
+        ``(z̄, P_z)``: ``z̄ = Σ Wᵐ Zᵢ`` and ``P_z = Σ Wᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ (+ noise_cov)``.
+    """
+    if isinstance(Wm, SigmaPoints):
+        sp = Wm
+    else:
+        sp = SigmaPoints()
+        sp.xi = np.zeros((np.size(Wm), 0))
+        sp.Wm, sp.Wc = np.asarray(Wm, float).ravel(), np.asarray(Wc, float).ravel()
+        sp._finish()
+    Z_ = np.asarray(Z, dtype=np.float64)
+    single = Z_.ndim == 2
+    Z_ = Z_[None] if single else Z_
+    if Z_.ndim != 3 or Z_.shape[1] != sp.Wm.shape[0] or sp.Wc.shape != sp.Wm.shape:
+        raise ValueError(f"Z must have shape (N, k) or (B, N, k) with N = {sp.Wm.shape[0]} "
+                         f"weights; got {np.shape(Z)}")
+    mean, D, d, c = _moments(Z_, sp)
+    P = symmetrize(_cross(D, d, c, D, d, c, sp))
+    if noise_cov is not None:
+        P = P + np.asarray(noise_cov, dtype=np.float64)
+    return (mean[0], P[0]) if single else (mean, P)
+
+
+class UnscentedKalmanFilter(Estimator):
+    """Unscented Kalman filter for additive noise (paper 003, Table 2, corrected; batched).
+
+    predict: ``χ = points(x, P)``, ``x⁻, P⁻ = UT(f(χ, u)) + G Q Gᵀ``;
+    update: ``Z = h(χ⁻)``, ``ŷ, S = UT(Z) + R``, ``Pxz = Σ Wᶜ (χ⁻ − x⁻)(Z − ŷ)ᵀ``,
+    ``K = Pxz S⁻¹``, ``x⁺ = x⁻ + K (y − ŷ)``, ``P⁺ = P⁻ − K S Kᵀ`` (symmetrised).
+
+    Args:
+        model: any :class:`StateSpaceModel`.
+        alpha, beta, kappa: scaled-UT parameters (defaults 1e-3, 2, 0; module docstring).
+        points: a :class:`SigmaPoints` of size ``n_x`` (e.g. :class:`CubatureSigmaPoints`);
+            overrides ``alpha, beta, kappa``.
+        redraw: draw fresh points ``χ⁻`` from ``(x⁻, P⁻)`` for the update (default,
+            Särkkä 2013, Alg. 5.14: then ``Q`` enters ``S`` and ``Pxz`` and the UKF
+            equals the KF on linear models). ``False`` reuses the propagated points,
+            as paper 003's Table 2 (and filterpy) do.
+        jitter: opt-in relative diagonal loading before each factorisation (default 0).
+        **options: those of :class:`~fir_gym.estimators.base.Estimator`.
+    """
+
+    name = "ukf"
+
+    def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
+                 P0: ArrayLike | None = None, alpha: float = 1e-3, beta: float = 2.0,
+                 kappa: float = 0.0, points: SigmaPoints | None = None, redraw: bool = True,
+                 jitter: float = 0.0, **options: Any) -> None:
+        if isinstance(model, StateSpaceModel) and getattr(model, "time_invariant", True) is False:
+            raise TypeError(f"model must have time-free f/h for {type(self).__name__}; got a "
+                            f"{type(model).__name__} (use KalmanFilter)")
+        if points is None:
+            points = MerweScaledSigmaPoints(getattr(model, "n_x", 1), alpha, beta, kappa)
+        if not isinstance(points, SigmaPoints):
+            raise TypeError(f"points must be a SigmaPoints instance; got {type(points).__name__}")
+        if isinstance(model, StateSpaceModel) and points.n != model.n_x:
+            raise ValueError(f"points must be for n = {model.n_x} (the model's n_x); "
+                             f"got n = {points.n}")
+        if not np.isfinite(jitter) or jitter < 0:
+            raise ValueError(f"jitter must be a non-negative number; got {jitter!r}")
+        self.points, self.redraw, self.jitter = points, bool(redraw), float(jitter)
+        super().__init__(model, x0=x0, P0=P0, **options)
+        self._f, _, self._h, _ = model_callables(model)
+        self._GQGt = model.GQGT
+
+    def _draw(self, x: FloatArray, P: FloatArray) -> FloatArray:
+        return self.points.points(x, matrix_sqrt(P, self.jitter))
+
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return self._correct(x, P, self._draw(x, P), y, valid)
+
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        n_b, n = x.shape
+        N = self.points.num_points
+        X = self._draw(x, P)
+        U = np.repeat(u, N, axis=0)
+        Xf = self._f(X.reshape(n_b * N, n), U).reshape(n_b, N, n)
+        x_pred, D, d, c = _moments(Xf, self.points)
+        P_pred = symmetrize(_cross(D, d, c, D, d, c, self.points)) + self._GQGt
+        X_pred = self._draw(x_pred, P_pred) if self.redraw else Xf
+        return self._correct(x_pred, P_pred, X_pred, y, valid)
+
+    def _correct(self, x: FloatArray, P: FloatArray, X: FloatArray, y: FloatArray,
+                 valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        n_b, N, n = X.shape
+        sp = self.points
+        Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
+        y_hat, DZ, dz, cz = _moments(Z, sp)
+        _, DX, dx, cx = _moments(X, sp)
+        S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp)) + self.model.R
+        Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        W = spd_inverse(S)
+        K = Pxz @ W
+        e = y - y_hat
+        x_new = x + (K @ e[:, :, None])[:, :, 0]
+        P_new = symmetrize(P - K @ Pxz.mT)
+        nis = ((W @ e[:, :, None])[:, :, 0] * e).sum(axis=1)
+        if not valid.all():
+            x_new = np.where(valid[:, None], x_new, x)
+            P_new = np.where(valid[:, None, None], P_new, P)
+            nis = np.where(valid, nis, np.nan)
+        return x_new, P_new, nis
+
+
+register_estimator("ukf", UnscentedKalmanFilter)
