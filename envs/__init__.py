@@ -6,7 +6,9 @@ built from nominal parameters) and never imports a concrete filter.
 
 from .carrier_motion import CarrierMotionEnv
 from .orbit import OrbitEnv
+from .pendulum_slider import PendulumSliderEnv
 from .uncertain_oscillator import UncertainOscillatorEnv
 from .van_der_pol import VanDerPolEnv
 
-__all__ = ["CarrierMotionEnv", "OrbitEnv", "UncertainOscillatorEnv", "VanDerPolEnv"]
+__all__ = ["CarrierMotionEnv", "OrbitEnv", "PendulumSliderEnv", "UncertainOscillatorEnv",
+           "VanDerPolEnv"]

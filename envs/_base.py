@@ -192,7 +192,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         self._last_extra = extra
         info: dict[str, Any] = {"state": x_next.copy(), "action": a.copy(),
                                 "action_clipped": clipped, **extra}
-        if np.all(np.isfinite(x_next)):
+        if np.isfinite(x_next).all():
             obs = self._measure(x_next, extra, self.np_random)
         else:
             # A plant whose domain check is right never gets here; if parameters push
@@ -228,10 +228,10 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
                 a = a.reshape(1)
             else:
                 raise ValueError(f"action must have shape {shape}; got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action must be finite; got {a}")
-        clipped = np.clip(a, -1.0, 1.0)
-        return clipped, bool(np.any(clipped != a))
+        clipped = a.clip(-1.0, 1.0)
+        return clipped, bool((clipped != a).any())
 
 
 def psd_sqrt(M: FloatArray) -> FloatArray:

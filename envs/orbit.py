@@ -180,11 +180,12 @@ class OrbitEnv(PlantEnv):
         self._dynamics = OrbitDynamics(self.params["mu"], self.params["euler_dt"],
                                        self.params["substeps"], self.params["thrust_max"])
         self._process_sqrt = psd_sqrt(self.params["Q"])
+        self._has_process_noise = bool(np.any(self.params["Q"]))
 
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
         x_next = self._dynamics.f(x, a)
-        if np.any(self.params["Q"]):
+        if self._has_process_noise:
             x_next = x_next + rng.standard_normal(x.shape) @ self._process_sqrt.T
         return x_next, {}
 

@@ -13,7 +13,7 @@ def make(env_id, num_envs=3, **kwargs):
                         **kwargs)
 
 
-@pytest.mark.parametrize("env_id", fir_gym.ENV_IDS)
+@pytest.mark.parametrize("env_id", fir_gym.VECTOR_ENV_IDS)
 def test_vector_step_equals_the_plant_hooks_applied_system_by_system(env_id):
     """Replay the vector env's draws through the single plant's hooks, one system at a time."""
     venv = make(env_id, 3)
@@ -48,7 +48,7 @@ class _ZeroNoise:
         return np.zeros(shape if shape is not None else ())
 
 
-@pytest.mark.parametrize("env_id", fir_gym.ENV_IDS)
+@pytest.mark.parametrize("env_id", fir_gym.VECTOR_ENV_IDS)
 def test_same_seed_is_bit_identical(env_id):
     runs = []
     for _ in range(2):

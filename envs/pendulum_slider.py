@@ -1,0 +1,364 @@
+"""Pendulum on a spring-loaded slider, simulated in MuJoCo: paper 003's plant."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fir_gym.estimators._validation import FloatArray, as_covariance, positive
+
+from . import _mujoco_passive
+from ._base import PlantEnv, psd_sqrt
+from .pendulum_slider_dynamics import FRICTION_MODES, PAPER_PARAMS, PendulumSliderDynamics
+
+ASSET = Path(__file__).parent / "assets" / "pendulum_slider.xml"
+PAPER_R_STD = (0.003, 0.03, 0.03, 0.3)
+#: contact settings of the "coulomb" mode: stiff enough that the stick band does not creep
+RAIL_SOLREF = (0.002, 1.0)
+RAIL_SOLIMP = (0.99, 0.9999, 0.0001, 0.5, 2.0)
+
+
+class PaperFrictionForce:
+    """Paper 003's sign-free friction term, solved exactly at every RK4 stage.
+
+    Eq (15) (with the errata of PAPERS.md) adds to the slider the force
+    ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
+    force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
+    ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``
+    gives ``F = (c₀ + c₁ θ̈₀) / (1 - c₁ [M⁻¹]_θx)``, computed from MuJoCo's own mass
+    matrix and bias forces at the stage's state.
+    """
+
+    def __init__(self, model: mujoco.MjModel, mu: float, m1: float, m2: float, l: float,
+                 g: float) -> None:
+        self.mu, self.weight, self.m2l = mu, (m1 + m2) * g, m2 * l
+        self.x_dof = int(model.jnt_dofadr[model.joint("x").id])
+        self.th_dof = int(model.jnt_dofadr[model.joint("theta").id])
+        self.th_qpos = int(model.jnt_qposadr[model.joint("theta").id])
+        self.gear = float(model.actuator_gear[0, 0])
+        nv = model.nv
+        self._bias = np.zeros(nv)
+        self._rhs = np.zeros((2, nv))
+        self._rhs[1, self.x_dof] = 1.0
+        self._sol = np.zeros((2, nv))
+
+    def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        # called at every RK4 stage: kept to a few C calls and float arithmetic
+        mujoco.mj_rne(m, d, 0, self._bias)           # bias forces at this stage's state
+        rhs = self._rhs[0]
+        np.subtract(d.qfrc_passive, self._bias, out=rhs)
+        rhs += d.qfrc_applied
+        rhs[self.x_dof] += self.gear * d.ctrl[0]
+        mujoco.mj_solveM(m, d, self._sol, self._rhs)
+        th, w = float(d.qpos[self.th_qpos]), float(d.qvel[self.th_dof])
+        c0 = -self.mu * (self.weight + self.m2l * math.cos(th) * w * w)
+        c1 = -self.mu * self.m2l * math.sin(th)
+        sol = self._sol
+        force = (c0 + c1 * sol[0, self.th_dof]) / (1.0 - c1 * sol[1, self.th_dof])
+        d.qfrc_passive[self.x_dof] += force
+
+
+class PendulumSliderEnv(PlantEnv):
+    """
+    ## Description
+
+    A slider on a horizontal rail, held by a spring (stiffness 2k, rest position
+    l0), carries a pendulum hinged with viscous friction M0; a motor pushes the
+    slider. Paper 003 ("UKF-based state and parameter estimation of a
+    pendulum-slider") estimates the states and the friction parameters μ and M0
+    with a UKF on the state augmented with [μ, M0] and compares it with least
+    squares. The plant is modelled in MuJoCo (``envs/assets/pendulum_slider.xml``,
+    Table 3: m1 = 0.654 kg, m2 = 0.7925 kg, l = 0.2 m, I_c = 0.0014 kg m², k = 100
+    N/m, l0 = 0.025 m, M0 = 0.2 N m s/rad, μ = 0.2, g = 9.8) with RK4 at 1 ms.
+
+    Friction of the slider on the rail (``friction``):
+
+    * ``"paper"`` — eq (15)'s term ``-μ N`` with the true normal force ``N`` and no
+      sign(ẋ): a constant push that moves the rest position from 25 mm to
+      10.8 mm. It is applied exactly at every RK4 stage by MuJoCo's passive-force
+      callback, installed only while this env steps (the callback is global to the
+      process and, left installed, would break model compilation everywhere; see
+      ``fir_gym.envs._mujoco_passive``), so the plant equals an RK4 integration of
+      the corrected ODE to round-off;
+    * ``"coulomb"`` — real dry friction: the slider rests on the rail (a vertical
+      joint and a box-on-plane contact with friction μ, stiff ``solref``), so the
+      friction is ``μ N sign(ẋ)`` with the true normal force and the slider sticks
+      inside the band ``|2k (x - l0)| < μ N`` without creeping;
+    * ``"none"``.
+
+    ## Action Space
+
+    | Num | Action                                  | Min | Max |
+    |-----|-----------------------------------------|-----|-----|
+    | 0   | motor force U, in units of `force_max`  | -1  | 1   |
+
+    ``U = action * force_max`` (10 N) is held over the env step.
+
+    ## Observation Space
+
+    All four states measured with Gaussian noise ``R = diag([0.003, 0.03, 0.03,
+    0.3]²)`` (paper 003; drawn in Python from the env's generator):
+
+    | Num | Observation    | Unit  |
+    |-----|----------------|-------|
+    | 0   | x + v0         | m     |
+    | 1   | ẋ + v1         | m/s   |
+    | 2   | θ + v2         | rad   |
+    | 3   | θ̇ + v3         | rad/s |
+
+    (±inf bounds: the noise is Gaussian; Gymnasium's checker warns.)
+
+    ## State (``info["state"]``)
+
+    ``[x, ẋ, θ, θ̇]`` (θ = 0 hanging down). ``info["force"]`` is the applied force (N).
+
+    ## Rewards
+
+    Damp the swing and hold the slider at its rest position ``x_rest`` (10.8 mm
+    with the paper's friction, l0 otherwise) with little force, per second of
+    simulated time: ``-(θ² + 0.1 θ̇² + 100 (x - x_rest)² + 0.01 action²) · Δt / 0.01``
+    (``Δt`` = 1 ms × ``frame_skip``).
+
+    ## Starting State
+
+    ``[x_rest, 0, 0.5, 0]`` plus ``N(0, diag(0, 0, 0.1², 0))``: a swing to damp.
+    Paper 003's experiment starts from rest: ``initial_state=(x_rest, 0, 0, 0),
+    initial_state_cov=None``.
+
+    ## Episode End
+
+    Termination when the slider leaves the rail (``|x - l0| > 0.3`` m) or the state
+    is not finite; truncation at 5000 steps (5 s at the default 1 kHz).
+
+    ## Arguments
+
+    ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", frame_skip=1,
+    force_max=10.0, R=diag(PAPER_R_STD²), Q=None, nominal=None, initial_state=None,
+    initial_state_cov=None, render_mode=None, width=480, height=360, **params)``,
+    ``params`` among ``m1, m2, l, I_c, k, l0, M0, mu, g``. ``frame_skip`` MuJoCo
+    steps of 1 ms make one env step. ``Q`` is the true process noise added to the
+    state after each env step (none by default: MuJoCo is deterministic); the
+    model's ``Q`` defaults to paper 003's 1e-6 per state (``nominal={"Q": ...}``).
+    ``nominal`` may change any physical parameter, ``R``, ``Q`` or ``friction`` for
+    the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
+    parameters ``[μ, M0]`` can be estimated jointly with the state.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    state_names: ClassVar[tuple[str, ...]] = ("x", "x_dot", "theta", "theta_dot")
+    measurement_names: ClassVar[tuple[str, ...]] = ("x_measured", "x_dot_measured",
+                                                    "theta_measured", "theta_dot_measured")
+    action_names: ClassVar[tuple[str, ...]] = ("force",)
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
+
+    def __init__(
+        self,
+        *,
+        friction: str = "paper",
+        frame_skip: int = 1,
+        force_max: float = 10.0,
+        R: ArrayLike | None = None,
+        Q: ArrayLike | None = None,
+        nominal: Mapping[str, Any] | None = None,
+        initial_state: ArrayLike | None = None,
+        initial_state_cov: ArrayLike | None = "swing",   # type: ignore[assignment]
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 360,
+        **physical: float,
+    ) -> None:
+        unknown = sorted(set(physical) - set(PAPER_PARAMS))
+        if unknown:
+            raise TypeError(f"unexpected keyword argument(s) {unknown}; physical parameters are "
+                            f"{sorted(PAPER_PARAMS)}")
+        if friction not in FRICTION_MODES:
+            raise ValueError(f"friction must be one of {FRICTION_MODES}; got {friction!r}")
+        phys = {**PAPER_PARAMS, **{k: float(v) for k, v in physical.items()}}
+        for name in ("m1", "m2", "l", "I_c", "k", "g"):
+            positive(name, phys[name])
+        for name in ("M0", "mu"):
+            if not np.isfinite(phys[name]) or phys[name] < 0:
+                raise ValueError(f"{name} must be a finite non-negative number; got {phys[name]!r}")
+        params: dict[str, Any] = {
+            **phys,
+            "friction": friction,
+            "frame_skip": positive("frame_skip", frame_skip, integer=True),
+            "force_max": positive("force_max", force_max),
+            "R": as_covariance("R", np.square(PAPER_R_STD) if R is None else R, 4, definite=True),
+            "Q": np.zeros((4, 4)) if Q is None else as_covariance("Q", Q, 4),
+        }
+        self.x_rest = self._rest_position(params)
+        if initial_state is None:
+            initial_state = (self.x_rest, 0.0, 0.5, 0.0)
+        if isinstance(initial_state_cov, str):
+            if initial_state_cov != "swing":
+                raise ValueError(f"initial_state_cov must be 'swing', None or a 4x4 covariance; "
+                                 f"got {initial_state_cov!r}")
+            initial_state_cov = np.diag([0.0, 0.0, 0.1**2, 0.0])
+        super().__init__(params=params, nominal=nominal,
+                         default_nominal={"Q": np.full(4, 1e-6)},
+                         initial_state=initial_state, initial_state_cov=initial_state_cov,
+                         measurement_cov=params["R"], render_mode=render_mode)
+        self.width, self.height = positive("width", width, integer=True), \
+            positive("height", height, integer=True)
+        self._process_sqrt = psd_sqrt(self.params["Q"])
+        self._has_process_noise = bool(np.any(self.params["Q"]))
+        self._build_simulation()
+
+    # ------------------------------------------------------------------ simulation
+    @staticmethod
+    def _rest_position(params: Mapping[str, Any]) -> float:
+        """Slider rest position: ``l0 - μ (m1 + m2) g / 2k`` with the paper's push, else ``l0``."""
+        if params["friction"] != "paper":
+            return float(params["l0"])
+        return float(params["l0"] - params["mu"] * (params["m1"] + params["m2"]) * params["g"]
+                     / (2.0 * params["k"]))
+
+    def _build_simulation(self) -> None:
+        p = self.params
+        spec = mujoco.MjSpec.from_file(str(ASSET))
+        x_joint, th_joint = spec.joint("x"), spec.joint("theta")
+        # MuJoCo 4 keeps polynomial coefficients [linear, quadratic, cubic]: set the linear one
+        x_joint.stiffness = [2.0 * p["k"], 0.0, 0.0]
+        x_joint.springref = p["l0"]
+        th_joint.damping = [p["M0"], 0.0, 0.0]
+        slider, pendulum = spec.body("slider"), spec.body("pendulum")
+        slider.mass = p["m1"]
+        pendulum.mass = p["m2"]
+        pendulum.ipos = [0.0, 0.0, -p["l"]]
+        pendulum.inertia = [p["I_c"]] * 3
+        spec.option.gravity = [0.0, 0.0, -p["g"]]
+        if p["friction"] == "coulomb":
+            slider.add_joint(name="z", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+            for geom in (spec.geom("slider"), spec.geom("rail")):
+                geom.contype = geom.conaffinity = 1
+                geom.condim = 3
+                geom.friction = [p["mu"], 0.0, 0.0]
+                geom.solref = list(RAIL_SOLREF)
+                geom.solimp = list(RAIL_SOLIMP)
+            # the slider box's bottom face (z = -0.015) rests on the rail's top face
+        self.mj_model = spec.compile()
+        self.mj_data = mujoco.MjData(self.mj_model)
+        m = self.mj_model
+        self._qpos = [int(m.jnt_qposadr[m.joint(n).id]) for n in ("x", "theta")]
+        self._dof = [int(m.jnt_dofadr[m.joint(n).id]) for n in ("x", "theta")]
+        self._z_rest = self._settle_vertical() if p["friction"] == "coulomb" else None
+        self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"])
+                              if p["friction"] == "paper" else None)
+        self._renderer: mujoco.Renderer | None = None
+
+    def _settle_vertical(self) -> float:
+        """The slider's resting height on the rail (contact penetration), found once."""
+        m, d = self.mj_model, self.mj_data
+        z_adr = int(m.jnt_qposadr[m.joint("z").id])
+        mujoco.mj_resetData(m, d)
+        d.qpos[self._qpos[0]] = self.params["l0"]
+        for _ in range(300):
+            mujoco.mj_step(m, d)
+        return float(d.qpos[z_adr])
+
+    def _write_state(self, x: FloatArray) -> None:
+        m, d = self.mj_model, self.mj_data
+        mujoco.mj_resetData(m, d)
+        d.qpos[self._qpos] = x[[0, 2]]
+        d.qvel[self._dof] = x[[1, 3]]
+        if self._z_rest is not None:
+            d.qpos[int(m.jnt_qposadr[m.joint("z").id])] = self._z_rest
+        mujoco.mj_forward(m, d)
+
+    def _read_state(self) -> FloatArray:
+        d = self.mj_data
+        return np.array([d.qpos[self._qpos[0]], d.qvel[self._dof[0]],
+                         d.qpos[self._qpos[1]], d.qvel[self._dof[1]]])
+
+    # ------------------------------------------------------------------ plant hooks
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[FloatArray, dict[str, Any]]:
+        obs, info = super().reset(seed=seed, options=options)
+        self._write_state(self.state)
+        return obs, info
+
+    def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
+                    ) -> tuple[FloatArray, dict[str, Any]]:
+        if x.ndim != 1:
+            raise ValueError("PendulumSlider-v0 simulates one system; it has no batched path")
+        force = float(a[0]) * self.params["force_max"]
+        d = self.mj_data
+        d.ctrl[0] = force
+        with _mujoco_passive.passive_force(self._friction_law):
+            for _ in range(self.params["frame_skip"]):
+                mujoco.mj_step(self.mj_model, d)
+        x_next = self._read_state()
+        if self._has_process_noise:
+            x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
+            self._write_state(x_next)
+            d.ctrl[0] = force
+        return x_next, {"force": force}
+
+    def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
+        return x.copy()
+
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
+        cost = (x_next[2] ** 2 + 0.1 * x_next[3] ** 2 + 100.0 * (x_next[0] - self.x_rest) ** 2
+                + 0.01 * float(a[0]) ** 2)
+        return -float(cost) * self.params["frame_skip"] * 0.1
+
+    def _in_domain(self, x: FloatArray) -> bool:
+        return bool(np.isfinite(x).all() and abs(x[0] - self.params["l0"]) <= 0.3)
+
+    def _build_model(self, params: Mapping[str, Any]) -> Any:
+        physical = {key: params[key] for key in PAPER_PARAMS}
+        skip = params["frame_skip"]
+        dynamics = PendulumSliderDynamics(**physical, dt=1e-3 * skip, substeps=skip,
+                                          friction=params["friction"],
+                                          input_scale=params["force_max"])
+        return dynamics.model(Q=params["Q"], R=params["R"],
+                              name=f"PendulumSlider({params['friction']})")
+
+    # ------------------------------------------------------------------ rendering, pickling
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            return super().render()
+        if self._renderer is None:
+            try:
+                self._renderer = mujoco.Renderer(self.mj_model, self.height, self.width)
+            except Exception as err:  # no OpenGL context: say how to get one
+                raise RuntimeError(
+                    "MuJoCo could not create an OpenGL context for rgb_array rendering; "
+                    "without a display set MUJOCO_GL=egl (or osmesa) before importing mujoco"
+                ) from err
+        self._renderer.update_scene(self.mj_data, camera="side")
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        state.pop("_friction_law")
+        state["_saved_sim"] = (self.mj_data.qpos.copy(), self.mj_data.qvel.copy(),
+                               self.mj_data.ctrl.copy(), float(self.mj_data.time))
+        for key in ("mj_model", "mj_data"):
+            state.pop(key)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        qpos, qvel, ctrl, time = state.pop("_saved_sim")
+        self.__dict__.update(state)
+        self._build_simulation()
+        self.mj_data.qpos[:], self.mj_data.qvel[:], self.mj_data.ctrl[:] = qpos, qvel, ctrl
+        self.mj_data.time = time
+        mujoco.mj_forward(self.mj_model, self.mj_data)
