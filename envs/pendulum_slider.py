@@ -315,14 +315,21 @@ class PendulumSliderEnv(PlantEnv):
     def _in_domain(self, x: FloatArray) -> bool:
         return bool(np.isfinite(x).all() and abs(x[0] - self.params["l0"]) <= 0.3)
 
-    def _build_model(self, params: Mapping[str, Any]) -> Any:
-        physical = {key: params[key] for key in PAPER_PARAMS}
+    @staticmethod
+    def _make_dynamics(params: Mapping[str, Any]) -> PendulumSliderDynamics:
         skip = params["frame_skip"]
-        dynamics = PendulumSliderDynamics(**physical, dt=1e-3 * skip, substeps=skip,
-                                          friction=params["friction"],
-                                          input_scale=params["force_max"])
-        return dynamics.model(Q=params["Q"], R=params["R"],
-                              name=f"PendulumSlider({params['friction']})")
+        return PendulumSliderDynamics(**{key: params[key] for key in PAPER_PARAMS},
+                                      dt=1e-3 * skip, substeps=skip, friction=params["friction"],
+                                      input_scale=params["force_max"])
+
+    @property
+    def dynamics(self) -> PendulumSliderDynamics:
+        """The ODE with the *nominal* parameters (the model's), e.g. for least squares."""
+        return self._make_dynamics(self.nominal_params)
+
+    def _build_model(self, params: Mapping[str, Any]) -> Any:
+        return self._make_dynamics(params).model(Q=params["Q"], R=params["R"],
+                                                 name=f"PendulumSlider({params['friction']})")
 
     # ------------------------------------------------------------------ rendering, pickling
     def render(self) -> NDArray[np.uint8] | None:

@@ -205,6 +205,69 @@ class PendulumSliderDynamics:
                    + 0.5 * (self.I_c + m2l * self.l) * w**2)
         return kinetic - m2l * self.g * np.cos(th) + self.k * (x[..., 0] - self.l0) ** 2
 
+    def least_squares_parameters(self, y: ArrayLike, U: ArrayLike,
+                                 difference: str = "backward") -> dict[str, float]:
+        """Paper 003's LSM: ``μ`` and ``M0`` by least squares on the equations of motion.
+
+        Both equations of motion are linear in one parameter each (paper mode, ``s = 1``):
+
+            μ · N_k  = U_k − 2k (x − l0) − m2 l sinθ θ̇² − (m1+m2) ẍ + m2 l cosθ θ̈
+            M0 · θ̇_k = −m2 g l sinθ − (I_c + m2 l²) θ̈ + m2 l cosθ ẍ
+
+        with the normal force ``N = (m1+m2) g + m2 l (cosθ θ̇² + sinθ θ̈)``, so each
+        parameter is one scalar regression, ``Σ φ r / Σ φ²``. The states are the
+        measurements ``y[k]`` (all four measured); the accelerations are finite
+        differences of the measured velocities:
+
+        * ``"backward"``: ``(v_k − v_{k−1}) / dt`` — the noise of ``θ̇_k`` enters both the
+          regressor ``θ̇_k`` and the target (through ``θ̈_k``), so the estimate of M0 is
+          biased by about ``−(I_c + m2 l²) σ²_θ̇ / (dt E[θ̇²])``: the size and sign of
+          paper 003's Table 5 (−0.7251);
+        * ``"forward"``: ``(v_{k+1} − v_k) / dt`` — the same correlation, opposite sign;
+        * ``"central"``: ``(v_{k+1} − v_{k−1}) / (2 dt)`` — independent of ``v_k``, so
+          nearly unbiased (what remains is the errors-in-variables attenuation).
+
+        ``U[k]`` is the force (N) held from sample ``k`` to ``k+1``; the equation at
+        sample ``k`` uses the force acting around it: ``U[k−1]`` for backward
+        differences, ``U[k]`` for forward ones, their mean for central ones.
+
+        Args:
+            y: measured states ``(K, 4)`` at this model's ``dt``.
+            U: forces ``(K − 1,)`` or ``(K,)`` in newtons.
+            difference: ``"backward"``, ``"forward"`` or ``"central"``.
+        """
+        Y = np.asarray(y, dtype=np.float64)
+        F = np.asarray(U, dtype=np.float64).reshape(-1)
+        if Y.ndim != 2 or Y.shape[1] != 4 or Y.shape[0] < 3:
+            raise ValueError(f"y must have shape (K, 4) with K >= 3; got {Y.shape}")
+        if F.shape[0] not in (Y.shape[0] - 1, Y.shape[0]):
+            raise ValueError(f"U must have K - 1 = {Y.shape[0] - 1} or K entries; got {F.shape[0]}")
+        if not (np.isfinite(Y).all() and np.isfinite(F).all()):
+            raise ValueError("y and U must be finite")
+        dt = self.dt                                     # one model step = one sample
+        v = Y[:, [1, 3]]
+        if difference == "backward":
+            idx = np.arange(1, Y.shape[0])
+            acc, force = (v[idx] - v[idx - 1]) / dt, F[idx - 1]
+        elif difference == "forward":
+            idx = np.arange(0, Y.shape[0] - 1)
+            acc, force = (v[idx + 1] - v[idx]) / dt, F[idx]
+        elif difference == "central":
+            idx = np.arange(1, Y.shape[0] - 1)
+            acc, force = (v[idx + 1] - v[idx - 1]) / (2.0 * dt), 0.5 * (F[idx - 1] + F[idx])
+        else:
+            raise ValueError(f"difference must be 'backward', 'forward' or 'central'; "
+                             f"got {difference!r}")
+        x, th, w = Y[idx, 0], Y[idx, 2], Y[idx, 3]
+        xdd, thdd = acc[:, 0], acc[:, 1]
+        m1, m2, l, g = self.m1, self.m2, self.l, self.g
+        m2l, sn, c = m2 * l, np.sin(th), np.cos(th)
+        normal = (m1 + m2) * g + m2l * (c * w * w + sn * thdd)
+        r1 = force - 2.0 * self.k * (x - self.l0) - m2l * sn * w * w - (m1 + m2) * xdd \
+            + m2l * c * thdd
+        r2 = -m2l * g * sn - (self.I_c + m2l * l) * thdd + m2l * c * xdd
+        return {"mu": float(normal @ r1 / (normal @ normal)), "M0": float(w @ r2 / (w @ w))}
+
     def model(self, Q: ArrayLike = 1e-6, R: ArrayLike = (0.003**2, 0.03**2, 0.03**2, 0.3**2),
               name: str | None = None) -> ParametricModel:
         """The filter's :class:`ParametricModel` (all four states measured, eq 17–18 defaults).

@@ -27,7 +27,7 @@ from . import __version__
 from .tables import format_table
 
 #: benchmark name -> module in fir_gym.benchmarks exposing main(argv)
-BENCHMARKS = ("kalman", "fir")
+BENCHMARKS = ("envs", "kalman", "fir")
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -48,18 +48,26 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from .scenarios import episodes
+    from .scenarios import SCENARIOS, episodes
 
+    out = Path(args.out) if args.out else None
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
     summaries = episodes.run_all(seed=args.seed)
     headers, rows = episodes.summary_rows(summaries)
-    text = format_table(headers, rows, markdown=args.markdown)
     print(f"Scripted episodes (one per environment, seed {args.seed})\n")
-    print(text)
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+    print(format_table(headers, rows, markdown=args.markdown))
+    if out:
         (out / "episodes.md").write_text(format_table(headers, rows, markdown=True) + "\n")
-        print(f"\nwrote {out / 'episodes.md'}")
+    wanted = SCENARIOS if not args.paper else tuple(f"paper{p}" for p in args.paper)
+    for name in wanted:
+        module = importlib.import_module(f"fir_gym.scenarios.{name}")
+        report = module.run(seed=args.seed, quick=args.quick)
+        print("\n" + report.to_text(markdown=args.markdown))
+        if out:
+            (out / f"{name}.md").write_text(report.to_text(markdown=True))
+    if out:
+        print(f"wrote the reports to {out}/")
     return 0
 
 
@@ -143,6 +151,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of every episode (default 0)")
     p.add_argument("--out", type=str, default=None, help="folder for Markdown reports")
     p.add_argument("--markdown", action="store_true", help="print Markdown tables")
+    p.add_argument("--quick", action="store_true",
+                   help="small Monte Carlo sizes (a smoke test; the numbers are noisier)")
+    p.add_argument("--paper", action="append", choices=["000", "001", "002", "003", "004"],
+                   help="run only this paper's experiment (repeatable)")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("train", help="train a controller with stable-baselines3")
