@@ -38,9 +38,14 @@ class OrbitDynamics:
         The loop runs on components, so one code path serves a single system (Python
         floats: fast for the plant) and a batch (numpy arrays: the model, the vector env).
         """
-        single = x.ndim == 1
-        r, v = (float(x[0]), float(x[1])) if single else (x[..., 0], x[..., 1])
-        a = (float(u[0]) if single else u[..., 0]) * self.thrust_max
+        lead = x.shape[:-1]
+        single = x.size == 2                       # one system, batched as (1, 2) or not
+        if single:
+            r, v = float(x.flat[0]), float(x.flat[1])
+            a = float(np.asarray(u).flat[0]) * self.thrust_max
+        else:
+            r, v = x[..., 0], x[..., 1]
+            a = u[..., 0] * self.thrust_max
         d, mu = self.euler_dt, self.mu
         j11, j12, j21, j22 = 1.0, 0.0, 0.0, 1.0
         for _ in range(self.substeps):
@@ -49,9 +54,11 @@ class OrbitDynamics:
                 g = 2.0 * mu / (r * r * r) * d
                 j11, j12, j21, j22 = j11 + d * j21, j12 + d * j22, j21 + g * j11, j22 + g * j12
             r, v = r + v * d, v + (a - mu / (r * r)) * d
-        x_next = np.array([r, v]) if single else np.stack([r, v], axis=-1)
+        x_next = np.array([r, v]).reshape(lead + (2,)) if single else np.stack([r, v], axis=-1)
         if not jacobian:
             return x_next, None
+        if single:
+            return x_next, np.array([[j11, j12], [j21, j22]]).reshape(lead + (2, 2))
         J = np.stack([np.stack(np.broadcast_arrays(j11, j12), -1),
                       np.stack(np.broadcast_arrays(j21, j22), -1)], -2)
         return x_next, J

@@ -56,14 +56,19 @@ class VanDerPolDynamics:
         The loop runs on components, so one code path serves a single system
         (Python floats: fast for the plant) and a batch (numpy arrays: the model).
         """
-        single = x.ndim == 1
-        x1, x2 = (float(x[0]), float(x[1])) if single else (x[..., 0], x[..., 1])
-        force = float(u[0]) * self.u_max if single else u[..., 0] * self.u_max
+        lead = x.shape[:-1]
+        single = x.size == 2                       # one system, batched as (1, 2) or not
+        if single:
+            x1, x2 = float(x.flat[0]), float(x.flat[1])
+            force = float(np.asarray(u).flat[0]) * self.u_max
+        else:
+            x1, x2 = x[..., 0], x[..., 1]
+            force = u[..., 0] * self.u_max
         tau, eps, half = self.tau, self.epsilon, 0.5 * self.tau
         if dW is None:
             noise: list[Any] = [0.0] * self.substeps
         else:  # floats for one system, (B,) rows for a batch
-            noise = dW.tolist() if single else list(dW)
+            noise = dW.reshape(self.substeps).tolist() if single else list(dW)
         x1_sum = 0.5 * x1
         if jacobian:  # Φ = [[p11, p12], [p21, p22]], the product of Heun step Jacobians
             p11, p12, p21, p22 = 1.0, 0.0, 0.0, 1.0
@@ -87,9 +92,15 @@ class VanDerPolDynamics:
             x1, x2 = x1 + 0.5 * (x2 + y2) * tau + dw, x2 + 0.5 * (a1 + b1) * tau + dw
             x1_sum = x1_sum + x1
         x1_mean = (x1_sum - 0.5 * x1) / self.substeps
-        x_end = np.array([x1, x2]) if single else np.stack([x1, x2], axis=-1)
+        if single:
+            x_end = np.array([x1, x2]).reshape(lead + (2,))
+            x1_mean = x1_mean if not lead else np.full(lead, x1_mean)
+        else:
+            x_end = np.stack([x1, x2], axis=-1)
         if not jacobian:
             return x_end, x1_mean, None
+        if single:
+            return x_end, x1_mean, np.array([[p11, p12], [p21, p22]]).reshape(lead + (2, 2))
         Phi = np.stack([np.stack(np.broadcast_arrays(p11, p12), -1),
                         np.stack(np.broadcast_arrays(p21, p22), -1)], -2)
         return x_end, x1_mean, Phi
