@@ -174,8 +174,10 @@ def run(n: int = 5000, batch: int = 1024, n_batched: int = 200, alpha: float = 1
     return rows
 
 
-def main() -> None:
-    """Print the table."""
+def main(argv: list[str] | None = None) -> int:
+    """Print the table (``fir-gym bench kalman``; no options)."""
+    if argv:
+        raise SystemExit(f"fir-gym bench kalman takes no arguments; got {argv}")
     rows = run()
     print(f"{'model':15s} {'filter':8s} {'single µs':>10s} {'B=1024 µs/sys':>14s} "
           f"{'filterpy µs':>12s} {'ours/filterpy':>14s}")
@@ -184,6 +186,7 @@ def main() -> None:
         ratio = "—" if r["ratio"] is None else f"{r['ratio']:.2f}"
         print(f"{r['model']:15s} {r['filter']:8s} {r['single_us']:10.1f} {r['batched_us']:14.3f} "
               f"{ref:>12s} {ratio:>14s}")
+    return 0
 
 
 if __name__ == "__main__":
