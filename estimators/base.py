@@ -15,6 +15,9 @@ An estimator is one object per filter, batched by design:
   broadcast. A batch of one is not a special code path.
 * ``x``, ``P`` (where defined), ``diverged`` and ``last_info`` are readable;
   returned arrays are fresh copies.
+* ``restart(systems)`` sends some systems of a batch back to their prior: their
+  next ``step`` consumes a first measurement (update only) while the others
+  predict and update as usual — what a vector env's autoreset needs.
 
 **Non-finite measurements** follow ``nan_policy``: ``"raise"`` (default) raises
 ``ValueError`` naming ``y``; ``"skip"`` treats the measurement of a system whose
@@ -59,6 +62,8 @@ class Estimator(ABC):
     name: ClassVar[str] = ""
     #: whether the filter needs and uses the prior (x0, P0); FIR filters do not
     uses_prior: ClassVar[bool] = True
+    #: whether the filter reports an error covariance ``P`` (a controller may observe it)
+    provides_covariance: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -116,8 +121,50 @@ class Estimator(ABC):
         self._k = 0
         self._diverged: np.ndarray | None = None
         self._nis_run: np.ndarray | None = None
+        self._fresh: np.ndarray | None = None
+        self._restarting = False
         self.last_info: dict[str, Any] = {}
         self._reset_state()
+
+    def restart(self, systems: ArrayLike) -> None:
+        """Send some systems of a batch back to the prior (e.g. their episode ended).
+
+        ``systems`` is a boolean mask ``(B,)`` or an array of indices. Their estimate
+        and covariance return to ``x0``/``P0`` (their rows, for a batched prior),
+        their divergence flag clears, and their next :meth:`step` consumes a *first*
+        measurement (an update only) while the other systems predict and update.
+        Before the first step, or when every system restarts, this is :meth:`reset`
+        with the same prior.
+        """
+        if self._x is None:
+            return
+        n_b = self._x.shape[0]
+        mask = np.zeros(n_b, bool)
+        try:
+            mask[np.asarray(systems)] = True
+        except (IndexError, ValueError, TypeError):
+            raise ValueError(f"systems must be a boolean mask of length {n_b} or indices below "
+                             f"{n_b}; got {systems!r}") from None
+        if np.asarray(systems).dtype == bool and np.asarray(systems).shape != (n_b,):
+            raise ValueError(f"systems must be a boolean mask of length {n_b}; got shape "
+                             f"{np.asarray(systems).shape}")
+        if not mask.any():
+            return
+        if mask.all():
+            self.reset(self._x0, self._P0)
+            return
+        n = self.model.n_x
+        self._x = np.array(self._x)
+        self._x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
+        if self._P is not None:
+            self._P = np.array(self._P)
+            self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
+        self._diverged[mask] = False
+        self._nis_run[mask] = 0
+        self._nis_running = bool(self._nis_run.any())
+        self._fresh |= mask
+        self._restarting = True
+        self._restart_systems(mask)
 
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
         """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``.
@@ -158,7 +205,10 @@ class Estimator(ABC):
             if self._k == 0:
                 x, P, nis = self._update(self._x, self._P, Y, valid)
             else:
-                x, P, nis = self._predict_update(self._x, self._P, Y, U, valid)
+                x_prior, P_prior = self._x, self._P
+                x, P, nis = self._predict_update(x_prior, P_prior, Y, U, valid)
+                if self._restarting:
+                    x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
             self._accept(x, P, nis, valid)
         self._k += 1
         return self._x[0].copy() if self._single else self._x.copy()
@@ -193,6 +243,20 @@ class Estimator(ABC):
     def _reset_state(self) -> None:  # noqa: B027 (optional hook)
         """Hook for subclasses to clear their own state on ``reset``."""
 
+    def _restart_systems(self, mask: np.ndarray) -> None:  # noqa: B027 (optional hook)
+        """Hook: clear the per-system state of the systems in ``mask`` (see :meth:`restart`)."""
+
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
+                        y: FloatArray, valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
+
+        The default calls :meth:`_update` on the sub-batch, which is right for filters
+        whose first step depends only on its arguments; filters with more per-system
+        state override it.
+        """
+        return self._update(x, P, y, valid)
+
     @abstractmethod
     def _update(
         self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
@@ -223,6 +287,7 @@ class Estimator(ABC):
         self._x = np.array(np.broadcast_to(self._x0, (n_batch, n)))
         self._P = np.array(np.broadcast_to(self._P0, (n_batch, n, n)))
         self._diverged = np.zeros(n_batch, bool)
+        self._fresh = np.zeros(n_batch, bool)
         self._nis_run = np.zeros(n_batch, int)
         self._nis_running = False
         self._all_valid = np.ones(n_batch, bool)
@@ -294,6 +359,26 @@ class Estimator(ABC):
             self._P = None
         self.last_info = {"diverged": self.diverged, "nis": None if nis is None else
                           (float(nis[0]) if self._single else nis.copy())}
+
+    def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
+                     x_prior: FloatArray, P_prior: FloatArray | None, Y: FloatArray,
+                     valid: np.ndarray) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """Replace the rows of restarted systems by their first step (an update only)."""
+        idx = np.flatnonzero(self._fresh)
+        xs, Ps, ns = self._update_systems(idx, x_prior[idx],
+                                          None if P_prior is None else P_prior[idx],
+                                          Y[idx], valid[idx])
+        x = np.array(x)
+        x[idx] = xs
+        if P is not None and Ps is not None:
+            P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+            P[idx] = Ps
+        if nis is not None:
+            nis = np.array(nis)
+            nis[idx] = np.nan if ns is None else ns
+        self._fresh[:] = False
+        self._restarting = False
+        return x, P, nis
 
     def _out(self, a: FloatArray) -> FloatArray:
         return a[0].copy() if self._single else a.copy()

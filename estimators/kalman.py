@@ -354,12 +354,20 @@ class LinearizedKalmanFilter(Estimator):
         self._x_nom = model.f(self._x_nom, u)
         return self._correct(dx, P, y, valid)
 
-    def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        H = self.model.H(self._x_nom)
-        e = y - self.model.h(self._x_nom) - (H @ dx[:, :, None])[:, :, 0]
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
+                        y: FloatArray, valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        # a restarted system's nominal path starts again at its prior
+        self._x_nom[idx] = x
+        return self._correct(np.zeros_like(x), P, y, valid, self._x_nom[idx])
+
+    def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
+                 x_nom: FloatArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+        x_nom = self._x_nom if x_nom is None else x_nom
+        H = self.model.H(x_nom)
+        e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
         dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
-        return self._x_nom + dx, P, nis
+        return x_nom + dx, P, nis
 
     @property
     def x_nominal(self) -> FloatArray | None:

@@ -109,7 +109,7 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if observation == "estimate":
             self.observation_space = estimate
         elif observation == "estimate+covariance":
-            if not getattr(self.estimator, "provides_covariance", True):
+            if not self.estimator.provides_covariance:
                 raise ValueError(f"{type(self.estimator).__name__} has no covariance; use "
                                  "observation='estimate' or 'estimate+measurement'")
             self._triu = np.triu_indices(n_x)

@@ -1,0 +1,137 @@
+"""One batched estimator across all sub-environments of a Gymnasium vector env."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
+
+from fir_gym.estimators import Estimator, estimator_class
+
+from .estimator_observation import OBSERVATION_KINDS, PRIOR_FLOOR
+
+
+class VectorEstimatorObservation(gym.vector.VectorWrapper):
+    """Replace a vector env's measurements by the estimates of one batched estimator.
+
+    Args:
+        env: a vector env of a fir-gym plant — ``gym.make_vec(id, n, vectorization_mode=
+            "sync" | "async" | "vector_entry_point")`` — in next-step autoreset mode
+            (Gymnasium's default).
+        estimator: an :class:`~fir_gym.estimators.Estimator` class or registry name
+            (built once, for the batch, from the plant's model with ``**options``).
+        observation: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``,
+            as for :class:`~fir_gym.wrappers.EstimatorObservation`.
+
+    System ``i`` of the estimator follows sub-env ``i``. On ``reset`` every system
+    starts from the plant's initial-state distribution and consumes ``y[0]``; on
+    ``step`` they consume ``y[k]`` with the applied actions (``info["action"]``).
+    When a sub-env ends an episode, the next step autoresets it (returning ``y[0]``
+    of a new episode): its system is then restarted (:meth:`Estimator.restart`) and
+    that measurement is its first, exactly as a fresh one-env
+    :class:`EstimatorObservation` would do. ``info`` gains ``estimate``,
+    ``estimation_error`` (where ``state`` is known) and ``estimator_diverged``, each
+    with Gymnasium's ``_key`` mask.
+    """
+
+    def __init__(self, env: VectorEnv, estimator: type[Estimator] | str,
+                 observation: str = "estimate", **options: Any) -> None:
+        super().__init__(env)
+        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if mode != AutoresetMode.NEXT_STEP:
+            raise ValueError(f"VectorEstimatorObservation follows next-step autoreset; this "
+                             f"vector env uses {mode}")
+        if observation not in OBSERVATION_KINDS:
+            raise ValueError(f"observation must be one of {OBSERVATION_KINDS}; got {observation!r}")
+        if isinstance(estimator, Estimator):
+            raise TypeError("give VectorEstimatorObservation an estimator class or name (it "
+                            "builds one batched estimator); got an instance")
+        cls = estimator_class(estimator) if isinstance(estimator, str) else estimator
+        if not (isinstance(cls, type) and issubclass(cls, Estimator)):
+            raise TypeError(f"estimator must be an Estimator subclass or a registry name; "
+                            f"got {estimator!r}")
+        model = _plant_attr(env, "model")
+        options = dict(options)
+        x0, P0 = _plant_attr(env, "initial_state"), _plant_attr(env, "initial_state_cov")
+        if x0 is not None and P0 is not None:
+            x0 = np.asarray(x0, dtype=np.float64)
+            options.setdefault("x0", x0)
+            options.setdefault("P0", np.asarray(P0) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2)))
+        self.estimator = cls(model, **options)
+        self.observation_kind = observation
+        n = self.num_envs
+        n_x = model.n_x
+        estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
+        if observation == "estimate":
+            single: spaces.Space = estimate
+        elif observation == "estimate+covariance":
+            if not cls.provides_covariance:
+                raise ValueError(f"{cls.__name__} has no covariance; use observation='estimate' "
+                                 "or 'estimate+measurement'")
+            self._triu = np.triu_indices(n_x)
+            single = spaces.Dict({"estimate": estimate, "covariance": spaces.Box(
+                -np.inf, np.inf, shape=(len(self._triu[0]),), dtype=np.float64)})
+        else:
+            single = spaces.Dict({"estimate": estimate,
+                                  "measurement": env.single_observation_space})
+        self.single_observation_space = single
+        self.observation_space = batch_space(single, n)
+        self._prev_done = np.zeros(n, dtype=bool)
+
+    def reset(self, *, seed: int | list[int] | None = None,
+              options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        y, info = self.env.reset(seed=seed, options=options)
+        self.estimator.reset(self.estimator._x0, self.estimator._P0)
+        x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
+        self._prev_done[:] = False
+        return self._observe(x_hat, y), self._annotate(info, x_hat)
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        y, reward, terminated, truncated, info = self.env.step(actions)
+        if self._prev_done.any():                      # those sub-envs were reset this step
+            self.estimator.restart(self._prev_done)
+        applied = info.get("action", actions)
+        u = np.asarray(applied, dtype=np.float64).reshape(self.num_envs, -1)
+        x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1),
+                                    u)
+        self._prev_done = np.logical_or(terminated, truncated)
+        return self._observe(x_hat, y), reward, terminated, truncated, \
+            self._annotate(info, x_hat)
+
+    def _observe(self, x_hat: NDArray[np.float64], y: Any) -> Any:
+        if self.observation_kind == "estimate":
+            return x_hat
+        if self.observation_kind == "estimate+covariance":
+            P = self.estimator.P
+            return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
+        return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
+
+    def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:
+        info = dict(info)
+        everyone = np.ones(self.num_envs, dtype=bool)
+        info["estimate"], info["_estimate"] = x_hat.copy(), everyone
+        if "state" in info:
+            mask = info.get("_state", everyone)
+            info["estimation_error"] = np.where(mask[:, None], np.asarray(info["state"]) - x_hat,
+                                                np.nan)
+            info["_estimation_error"] = mask
+        info["estimator_diverged"] = np.asarray(self.estimator.diverged, dtype=bool).copy()
+        info["_estimator_diverged"] = everyone
+        return info
+
+
+def _plant_attr(env: VectorEnv, name: str) -> Any:
+    """An attribute of the plant behind a native, sync or async vector env."""
+    base = env.unwrapped
+    plant = getattr(base, "plant", None)                 # fir-gym's native vector env
+    if plant is not None:
+        return getattr(plant, name, None)
+    try:
+        return base.get_attr(name)[0]                   # sync / async: from sub-env 0
+    except AttributeError:
+        return None
