@@ -69,6 +69,11 @@ class OrbitDynamics:
     def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.propagate(x, u, jacobian=True)[1]
 
+    def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``f`` and ``F`` in one pass of the Euler loop."""
+        x_next, J = self.propagate(x, u, jacobian=True)
+        return x_next, J
+
     @staticmethod
     def h(x: FloatArray) -> FloatArray:
         return x[..., :1].copy()
@@ -210,8 +215,8 @@ class OrbitEnv(PlantEnv):
         dyn = OrbitDynamics(positive("nominal mu", params["mu"]), params["euler_dt"],
                             params["substeps"], params["thrust_max"])
         dt = params["euler_dt"] * params["substeps"]
-        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, Q=params["Q"], R=params["R"],
-                               dt=dt, n_u=1, name=f"Orbit(mu={params['mu']:g})")
+        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, fF=dyn.f_and_F, Q=params["Q"],
+                               R=params["R"], dt=dt, n_u=1, name=f"Orbit(mu={params['mu']:g})")
 
     def _draw(self, canvas: _draw.Canvas) -> None:
         r = float(self.state[0])

@@ -111,6 +111,11 @@ class VanDerPolDynamics:
     def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.integrate(x, u, jacobian=True)[2]
 
+    def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``f`` and ``F`` in one pass of the Heun loop."""
+        x_end, _, Phi = self.integrate(x, u, jacobian=True)
+        return x_end, Phi
+
     @staticmethod
     def h(x: FloatArray) -> FloatArray:
         return x[..., :1].copy()
@@ -289,7 +294,8 @@ class VanDerPolEnv(PlantEnv):
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = self._make_dynamics(params)
-        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, G=NOISE_INPUT.reshape(2, 1),
+        return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, fF=dyn.f_and_F,
+                               G=NOISE_INPUT.reshape(2, 1),
                                Q=params["Q"] * params["h"], R=params["R"] / params["h"],
                                dt=params["h"], n_u=1, name="VanDerPol")
 

@@ -25,7 +25,7 @@ from .kalman import predict_covariance, update_kernel
 from .model import StateSpaceModel
 from .registry import register_estimator
 
-__all__ = ["ExtendedKalmanFilter", "model_callables"]
+__all__ = ["ExtendedKalmanFilter", "model_callables", "model_linearizer"]
 
 
 def model_callables(model: StateSpaceModel) -> tuple[Any, Any, Any, Any]:
@@ -41,6 +41,18 @@ def model_callables(model: StateSpaceModel) -> tuple[Any, Any, Any, Any]:
     F = model._F if (cls.F is StateSpaceModel.F and model._F is not None) else model.F
     H = model._H if (cls.H is StateSpaceModel.H and model._H is not None) else model.H
     return f, F, h, H
+
+
+def model_linearizer(model: StateSpaceModel) -> Any:
+    """``(x, u) -> (f(x, u), F(x, u))`` for the hot path: the model's fused ``fF`` when it has
+    one (one pass of the plant's integrator instead of two), else ``f`` and ``F`` apart."""
+    cls = type(model)
+    if cls.linearize is StateSpaceModel.linearize and getattr(model, "_fF", None) is not None:
+        return model._fF
+    if cls.linearize is not StateSpaceModel.linearize:
+        return model.linearize
+    f, F, _, _ = model_callables(model)
+    return lambda x, u: (f(x, u), F(x, u))
 
 
 class ExtendedKalmanFilter(Estimator):
@@ -62,6 +74,7 @@ class ExtendedKalmanFilter(Estimator):
                             f"{type(model).__name__} (use KalmanFilter)")
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, self._F, self._h, self._H = model_callables(model)
+        self._linearize = model_linearizer(model)
         self._GQGt = model.GQGT
 
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
@@ -72,8 +85,7 @@ class ExtendedKalmanFilter(Estimator):
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        F = self._F(x, u)
-        x = self._f(x, u)
+        x, F = self._linearize(x, u)
         P = predict_covariance(P, F, self._GQGt)
         e = y - self._h(x)
         x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)

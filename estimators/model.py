@@ -53,6 +53,9 @@ class StateSpaceModel:
             case ``n_w = n_x``.
         n_u: number of inputs.
         name: a label used in ``repr`` and reports.
+        fF: optional ``fF(x, u) -> (f(x, u), F(x, u))`` computed together, for plants
+            whose transition is an integrator that yields its Jacobian in the same
+            pass (see :meth:`linearize`).
 
     ``n_x`` is inferred from ``G`` (its rows) or from ``Q`` when ``G`` is absent;
     ``n_y`` from ``R``. The state noise covariance is ``G Q Gᵀ``
@@ -74,11 +77,12 @@ class StateSpaceModel:
         G: ArrayLike | None = None,
         n_u: int = 0,
         name: str | None = None,
+        fF: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]] | None = None,
     ) -> None:
         for arg, fn in (("f", f), ("h", h)):
             if not callable(fn):
                 raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
-        for arg, fn in (("F", F), ("H", H)):
+        for arg, fn in (("F", F), ("H", H), ("fF", fF)):
             if fn is not None and not callable(fn):
                 raise TypeError(f"{arg} must be callable or None; got {type(fn).__name__}")
         self.Q = _readonly(as_covariance("Q", Q))
@@ -100,6 +104,7 @@ class StateSpaceModel:
         self._h = h
         self._F = F
         self._H = H
+        self._fF = fF
         self._GQGT = _readonly(self.G @ self.Q @ self.G.T)
 
     # ------------------------------------------------------------------ callables
@@ -136,6 +141,14 @@ class StateSpaceModel:
             return self._H(x)
         return _central_jacobian(lambda z, _u: self._h(z), x, None)
 
+    def linearize(self, x: ArrayLike, u: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+        """``(f(x, u), F(x, u))`` together: one integration when the model has ``fF``."""
+        x = self._check_x(x)
+        u = self._input(u, x)
+        if self._fF is not None:
+            return self._fF(x, u)
+        return self.f(x, u), self.F(x, u)
+
     # ------------------------------------------------------------------ properties
     @property
     def GQGT(self) -> FloatArray:
@@ -161,7 +174,8 @@ class StateSpaceModel:
 
     def _constructor_kwargs(self) -> dict[str, Any]:
         return {"f": self._f, "h": self._h, "Q": self.Q, "R": self.R, "dt": self.dt,
-                "F": self._F, "H": self._H, "G": self.G, "n_u": self.n_u, "name": self.name}
+                "F": self._F, "H": self._H, "G": self.G, "n_u": self.n_u, "name": self.name,
+                "fF": self._fF}
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(name={self.name!r}, n_x={self.n_x}, n_y={self.n_y}, "

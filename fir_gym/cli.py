@@ -27,7 +27,7 @@ from . import __version__
 from .tables import format_table
 
 #: benchmark name -> module in fir_gym.benchmarks exposing main(argv)
-BENCHMARKS = ("envs", "kalman", "fir")
+BENCHMARKS = ("envs", "wrappers", "kalman", "fir")
 
 
 def _cmd_list(args: argparse.Namespace) -> int:

@@ -237,3 +237,14 @@ def test_nominal_overrides_reach_the_model_but_not_the_plant(env_id):
     obs_env, states_env = rollout(env_id, seed=4, steps=20)
     obs_other, states_other = rollout(env_id, seed=4, steps=20, nominal={key: value})
     assert np.array_equal(obs_env, obs_other) and np.array_equal(states_env, states_other)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_model_linearize_equals_f_and_F(env_id):
+    env = gym.make(env_id).unwrapped
+    model = env.model
+    X = env.initial_state + 0.05 * np.random.default_rng(2).standard_normal((4, model.n_x))
+    U = np.full((4, model.n_u), 0.3)
+    fx, Fx = model.linearize(X, U)
+    np.testing.assert_allclose(fx, model.f(X, U), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(Fx, model.F(X, U), rtol=0, atol=1e-15)

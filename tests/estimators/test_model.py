@@ -173,3 +173,25 @@ def test_time_varying_linear_model():
                                  R=lambda k: 1.0 if k < 2 else -1.0)
     with pytest.raises(ValueError, match=r"R\(2\) must be positive semi-definite"):
         bad.matrices(2)
+
+
+def test_linearize_fused_and_fallback_agree():
+    p = Pendulum()
+    calls = []
+
+    def fused(x, u):
+        calls.append(1)
+        return p.f(x, u), p.F(x, u)
+
+    plain = pendulum_model()
+    withfF = StateSpaceModel(f=p.f, h=p.h, F=p.F, H=p.H, fF=fused, Q=np.eye(2), R=np.eye(2),
+                             n_u=1)
+    X, U = np.random.default_rng(0).normal(size=(3, 2)), np.ones((3, 1))
+    for model in (plain, withfF):
+        fx, Fx = model.linearize(X, U)
+        np.testing.assert_array_equal(fx, p.f(X, U))
+        np.testing.assert_array_equal(Fx, p.F(X, U))
+    assert calls == [1]
+    assert withfF.replace(Q=2 * np.eye(2))._fF is fused
+    with pytest.raises(TypeError, match="fF must be callable"):
+        StateSpaceModel(f=p.f, h=p.h, fF=3, Q=np.eye(2), R=np.eye(2))
