@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike
 
 from fir_gym.estimators import LinearModel, discretize_lti
 from fir_gym.estimators._validation import FloatArray, positive
+from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import PlantEnv, psd_sqrt
@@ -186,6 +187,19 @@ class CarrierMotionEnv(PlantEnv):
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
         return -((x_next[..., 0] - a[..., 0] * self.c_max) / self._sigma1) ** 2
+
+    @property
+    def continuous_model(self) -> ContinuousModel:
+        """Paper 001's continuous model with the nominal parameters (for continuous filters).
+
+        ``z`` has intensity ``v``; the plant's discrete measurement is the point sample
+        with variance ``v / T`` (see the class docstring), which continuous filters
+        read as an interval average — a small mismatch at T = 0.1 s.
+        """
+        p = self.nominal_params
+        A, G, C = carrier_continuous(p)
+        return ContinuousModel.linear(A=A, C=C, G=G, Q=p["q"], R=p["v"], dt=p["sample_period"],
+                                      B=np.zeros((2, 1)), name="CarrierMotion (continuous)")
 
     def _build_model(self, params: Mapping[str, Any]) -> LinearModel:
         A_d, Q_d, C, R_d = carrier_discrete(params)

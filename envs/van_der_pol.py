@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike
 
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, positive
+from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import PlantEnv
@@ -36,6 +37,18 @@ class VanDerPolDynamics:
     def __init__(self, epsilon: float, h: float, substeps: int, u_max: float) -> None:
         self.epsilon, self.interval, self.substeps, self.u_max = epsilon, h, substeps, u_max
         self.tau = h / substeps
+
+    def drift(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        """The continuous drift ``a(x, u) = [x2, -x1 + ε (1 - x1²) x2 + u_max u]``."""
+        x1, x2 = x[..., 0], x[..., 1]
+        return np.stack([x2, -x1 + self.epsilon * (1.0 - x1 * x1) * x2 + self.u_max * u[..., 0]],
+                        axis=-1)
+
+    def drift_jacobian(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        """``∂a/∂x = A(x) + [[0, 0], [-2 ε x1 x2, 0]]``."""
+        J = self.A_of_x(x)
+        J[..., 1, 0] -= 2.0 * self.epsilon * x[..., 0] * x[..., 1]
+        return J
 
     def A_of_x(self, x: FloatArray) -> FloatArray:
         """``A(x)`` with ``a(x, 0) = A(x) x`` (paper 002, eqs 2.9–2.10)."""
@@ -197,7 +210,7 @@ class VanDerPolEnv(PlantEnv):
     ## Arguments
 
     ``gym.make("fir_gym/VanDerPol-v0", epsilon=1.0, Q=5.0, R=5.0, h=0.1,
-    substeps=100, u_max=5.0, state_bound=50.0, nominal=None,
+    substeps=100, u_max=5.0, state_bound=20.0, nominal=None,
     initial_state=(1, 1), initial_state_cov=None, render_mode=None)``.
     ``nominal`` may change ``epsilon, Q, R, h, substeps, u_max`` for the model.
 
@@ -263,6 +276,17 @@ class VanDerPolEnv(PlantEnv):
         """The true dynamics (exposes ``A_of_x`` for block-pulse filters)."""
         return self._dynamics
 
+    @property
+    def continuous_model(self) -> ContinuousModel:
+        """The filter's continuous-time belief (paper 002's form, with ``A(x)``).
+
+        Drift ``a(x, u)``, its Jacobian, the factorisation ``A(x)``, noise input
+        ``[1, 1]ᵀ`` with spectral density ``Q``, ``h(x) = x1`` with intensity ``R``, and
+        the block-pulse interval ``h`` — from the nominal parameters. The continuous
+        filters (``bpf-kf``, ``cd-ekf``) read this instead of :attr:`model`.
+        """
+        return van_der_pol_continuous_model(self.nominal_params)
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[FloatArray, dict[str, Any]]:
         self._trail = []
@@ -310,6 +334,21 @@ class VanDerPolEnv(PlantEnv):
         if len(trail) > 1:
             canvas.polyline(trail[:, 0], trail[:, 1], _draw.BLUE, width=1.5)
         canvas.circle(float(self.state[0]), float(self.state[1]), 0.03 * extent, _draw.ACCENT)
+
+
+def van_der_pol_continuous_model(params: Mapping[str, Any]) -> ContinuousModel:
+    """VanDerPol-v0's continuous model from its parameters (``epsilon, u_max, Q, R, h``).
+
+    ``a(x, u) = [x2, −x1 + ε (1 − x1²) x2 + u_max u]``, its Jacobian, the factorisation
+    ``A(x) = [[0, 1], [−1, ε (1 − x1²)]]`` (paper 002, eq 2.2), ``G = [1, 1]ᵀ``,
+    ``h(x) = x1``, spectral density ``Q`` and intensity ``R``, interval ``h``. The
+    callables are methods of :class:`VanDerPolDynamics`, so the model pickles.
+    """
+    dyn = VanDerPolDynamics(float(params["epsilon"]), float(params["h"]), 1,
+                            float(params["u_max"]))
+    return ContinuousModel(a=dyn.drift, J=dyn.drift_jacobian, A_of_x=dyn.A_of_x, h=dyn.h,
+                           H=dyn.H, G=NOISE_INPUT.reshape(2, 1), Q=params["Q"], R=params["R"],
+                           dt=params["h"], n_u=1, name="VanDerPol (continuous)")
 
 
 @functools.lru_cache(maxsize=8)

@@ -4,8 +4,12 @@ Imports numpy and scipy only: a filter is usable without Gymnasium. Importing
 this package registers every estimator's short name (``make_estimator("ekf", model)``).
 """
 
+from . import bounds, continuous_fir
 from .augment import AugmentedModel, ParametricModel, augment
 from .base import Estimator
+from .bpf import BlockPulseKalmanFilter
+from .cd_ekf import ContinuousDiscreteEKF
+from .continuous import ContinuousModel
 from .discretize import discretize_lti, linear_model_from_continuous
 from .extended import ExtendedKalmanFilter
 from .kalman import Innovation, KalmanFilter, LinearizedKalmanFilter, kf_predict, kf_update
@@ -23,6 +27,9 @@ from .unscented import (
 
 __all__ = [
     "AugmentedModel",
+    "BlockPulseKalmanFilter",
+    "ContinuousDiscreteEKF",
+    "ContinuousModel",
     "CubatureSigmaPoints",
     "Estimator",
     "ExtendedKalmanFilter",
@@ -39,7 +46,9 @@ __all__ = [
     "UnscentedKalmanFilter",
     "anees",
     "augment",
+    "bounds",
     "chi2_band",
+    "continuous_fir",
     "discretize_lti",
     "estimator_class",
     "estimator_names",

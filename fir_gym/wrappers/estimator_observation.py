@@ -40,10 +40,11 @@ def resolve_estimator(
     else:
         raise TypeError("estimator must be an Estimator instance, an Estimator subclass or a "
                         f"registry name; got {estimator!r}")
-    model = getattr(env.unwrapped, "model", None)
+    attribute = getattr(cls, "model_attribute", "model")     # continuous filters differ
+    model = getattr(env.unwrapped, attribute, None)
     if model is None:
-        raise ValueError(f"{type(env.unwrapped).__name__} has no `model`: an estimator needs the "
-                         "plant's StateSpaceModel (env.unwrapped.model)")
+        raise ValueError(f"{type(env.unwrapped).__name__} has no `{attribute}`: {cls.__name__} "
+                         f"needs the plant's model (env.unwrapped.{attribute})")
     options = dict(options)
     x0, P0 = default_prior(env)
     if x0 is not None:

@@ -55,7 +55,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         if not (isinstance(cls, type) and issubclass(cls, Estimator)):
             raise TypeError(f"estimator must be an Estimator subclass or a registry name; "
                             f"got {estimator!r}")
-        model = _plant_attr(env, "model")
+        model = _plant_attr(env, getattr(cls, "model_attribute", "model"))
+        if model is None:
+            raise ValueError(f"this vector env's plant has no "
+                             f"`{getattr(cls, 'model_attribute', 'model')}` for {cls.__name__}")
         options = dict(options)
         x0, P0 = _plant_attr(env, "initial_state"), _plant_attr(env, "initial_state_cov")
         if x0 is not None and P0 is not None:
@@ -65,7 +68,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         self.estimator = cls(model, **options)
         self.observation_kind = observation
         n = self.num_envs
-        n_x = model.n_x
+        n_x = self.estimator.model.n_x
         estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
         if observation == "estimate":
             single: spaces.Space = estimate
