@@ -4,18 +4,23 @@ Imports numpy and scipy only: a filter is usable without Gymnasium. Importing
 this package registers every estimator's short name (``make_estimator("ekf", model)``).
 """
 
-from . import bounds, continuous_fir
+from . import bounds, continuous_fir, fir_gains
 from .augment import AugmentedModel, ParametricModel, augment
 from .base import Estimator
 from .bpf import BlockPulseKalmanFilter
 from .cd_ekf import ContinuousDiscreteEKF
 from .continuous import ContinuousModel
 from .discretize import discretize_lti, linear_model_from_continuous
+from .efir import ExtendedFIRFilter
 from .extended import ExtendedKalmanFilter
+from .fir import FIRFilter
+from .fir_smoother import FIRSmoother
 from .kalman import Innovation, KalmanFilter, LinearizedKalmanFilter, kf_predict, kf_update
 from .metrics import anees, chi2_band, mean_nis, nees, nis, rmse, within_band
 from .model import LinearModel, StateSpaceModel, SystemMatrices, TimeVaryingLinearModel
+from .recursive_fir import RecursiveFIRFilter
 from .registry import estimator_class, estimator_names, make_estimator, register_estimator
+from .ufir import UFIRFilter
 from .unscented import (
     CubatureSigmaPoints,
     MerweScaledSigmaPoints,
@@ -32,17 +37,22 @@ __all__ = [
     "ContinuousModel",
     "CubatureSigmaPoints",
     "Estimator",
+    "ExtendedFIRFilter",
     "ExtendedKalmanFilter",
+    "FIRFilter",
+    "FIRSmoother",
     "Innovation",
     "KalmanFilter",
     "LinearModel",
     "LinearizedKalmanFilter",
     "MerweScaledSigmaPoints",
     "ParametricModel",
+    "RecursiveFIRFilter",
     "SigmaPoints",
     "StateSpaceModel",
     "SystemMatrices",
     "TimeVaryingLinearModel",
+    "UFIRFilter",
     "UnscentedKalmanFilter",
     "anees",
     "augment",
@@ -52,6 +62,7 @@ __all__ = [
     "discretize_lti",
     "estimator_class",
     "estimator_names",
+    "fir_gains",
     "kf_predict",
     "kf_update",
     "linear_model_from_continuous",

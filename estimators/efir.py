@@ -1,0 +1,229 @@
+"""The extended FIR filter of paper 000 (Han, Kwon & Han, EFIRF).
+
+The state is split into a nominal trajectory and a perturbation (paper 000
+eqs 3-11)::
+
+    x_nom[k] = f(x_nom[k-1], u[k-1])                          (4)
+    δx[k] ≈ F[k-1] δx[k-1] + w[k-1],   F[k-1] = ∂f/∂x|x_nom    (5), (6)
+    δy[k] = y[k] − h(x_nom[k]) ≈ H[k] δx[k] + v[k]            (7)-(10)
+    x̂[k] = x_nom[k] + δx̂[k]                                  (11)
+
+and ``δx̂`` is the time-varying minimum-variance unbiased FIR estimate over the
+window (eq 12-13, gain of Theorem 1). Here the gain is never formed: a
+:class:`~.fir.WindowBank` runs the two-stage recursion (path (c) of
+:mod:`~.fir_gains`, no ``F⁻¹``) for ``horizon`` staggered windows in lock-step,
+so one step costs one model linearisation plus O(1) vectorised updates.
+
+Nominal trajectories (``nominal=``):
+
+* ``"open-loop"`` (paper 000): one nominal per system, run open loop from the
+  filter's initial state ``x0`` with the inputs it is given. With model error it
+  drifts away from the truth; the perturbation model is then linearised far from
+  where the system is, and the neglected second-order terms grow with the drift.
+* ``"reanchor"``: every window carries its own nominal, started at the window's
+  first instant ``s`` from the filter's prediction of ``x[s]`` made before
+  ``y[s]`` arrives (``f(x̂[s−1], u[s−1])``; in predictor form ``x̂[s]`` itself).
+  Re-anchoring at the window start, never inside a window, keeps each window's
+  perturbation model one consistent linearisation. The anchor is *not* used as
+  information: the perturbation at the window start stays a free (diffuse)
+  parameter, so the estimate is unbiased whatever the anchor, and on a linear
+  model it equals :class:`~.fir.FIRFilter` exactly — the window's data alone
+  determine it. On a nonlinear model the anchor only moves the linearisation
+  point (a second-order effect), and it is never older than ``horizon`` steps.
+
+With ``Q = 0`` (paper 000 sim 1, Orbit-v0) the Kalman part of the recursion is
+identically zero (``P = 0``, ``K = 0``) and the minimum-variance unbiased gain
+reduces to weighted least squares of the window start on the stacked
+observation matrix — the model is trusted exactly within the window, so model
+error enters only as a bias that the finite window keeps bounded; with a scalar
+``R`` this is Shmaliy's UFIR (:mod:`~.ufir`), independent of ``R``'s size.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._fir_bank import WindowBank
+from ._validation import FloatArray, as_covariance, positive
+from .base import Estimator
+from .extended import model_callables
+from .model import StateSpaceModel
+from .registry import register_estimator
+
+NOMINALS = ("open-loop", "reanchor")
+
+
+class ExtendedFIRFilter(Estimator):
+    """Extended FIR filter (paper 000) on any :class:`~.model.StateSpaceModel` with ``F, H``.
+
+    Args:
+        model: the plant model (its ``F``/``H`` are used along the nominal).
+        horizon: ``N``, measurements per window (Orbit-v0: one per env step).
+        form: ``"filter"`` (window ``y[k-N+1..k]``) or ``"predictor"`` (paper 000,
+            window ``y[k-N..k-1]``).
+        nominal: ``"open-loop"`` (paper) or ``"reanchor"`` (see the module docstring).
+        x0: the nominal's initial state (paper 000: "the filter's initial state").
+        P0: only for the start-up covariance.
+
+    Start-up (``last_info["startup"]``): the growing-window estimate once the
+    measurements so far determine the perturbation, the nominal trajectory
+    before that (covariance ``P0`` propagated along it). A full window whose
+    linearisation does not determine the state (``last_info["rank_deficient"]``)
+    falls back to the previous estimate predicted through ``f`` (and ``F P Fᵀ +
+    GQGᵀ``). :meth:`restart` starts chosen systems of a batch again from ``x0``
+    (nominal, windows and start-up); the others do not notice.
+    """
+
+    name: ClassVar[str] = "efir"
+    uses_prior: ClassVar[bool] = False
+
+    def __init__(self, model: StateSpaceModel, *, horizon: int, form: str = "filter",
+                 nominal: str = "open-loop", x0: ArrayLike | None = None,
+                 P0: ArrayLike | None = None, **options: Any) -> None:
+        if not isinstance(model, StateSpaceModel) or not getattr(model, "time_invariant", True):
+            raise TypeError(f"{type(self).__name__} needs a StateSpaceModel with f, h, F, H; "
+                            f"got {type(model).__name__}")
+        self.horizon = positive("horizon", horizon, integer=True)
+        if form not in ("filter", "predictor"):
+            raise ValueError(f"form must be 'filter' or 'predictor'; got {form!r}")
+        if nominal not in NOMINALS:
+            raise ValueError(f"nominal must be one of {NOMINALS}; got {nominal!r}")
+        self.form, self.nominal = form, nominal
+        self._R = as_covariance("model.R", model.R, definite=True)
+        Qx = np.asarray(model.GQGT)
+        self._Qx = Qx if np.any(Qx) else None
+        super().__init__(model, x0=x0, P0=P0, **options)
+        self._f, self._F, self._h, self._H = model_callables(model)
+
+    @property
+    def x_nominal(self) -> FloatArray | None:
+        """The open-loop nominal (``"open-loop"``) or the newest window's anchored nominal."""
+        if self._nom is None:
+            return None
+        nom = self._nom if self._nom.ndim == 2 else self._nom[:, self._k_last % self.horizon]
+        return nom[0].copy() if self._single else nom.copy()
+
+    def _reset_state(self) -> None:
+        self._nom: FloatArray | None = None
+        self._bank: WindowBank | None = None
+        self._pending: np.ndarray | None = None       # systems restarted, not yet stepped
+        self._info: dict[str, Any] = {}
+        self._k_last = 0
+
+    def _init_batch(self, n_batch: int) -> None:
+        n, L = self.model.n_x, self.horizon
+        self._bank = WindowBank(n_batch, L, n)
+        self._P_open = self._P.copy()
+        self._age = np.zeros(n_batch, int)            # measurements since (re)start
+        self._in_startup = True                       # some system's window is not full
+        self._no_startup = np.zeros(n_batch, bool)
+        if self.nominal == "open-loop":
+            self._nom = self._x.copy()
+        else:
+            self._nom = np.repeat(self._x[:, None, :], L, axis=1)
+
+    def _restart_systems(self, mask: np.ndarray) -> None:
+        self._pending = mask.copy() if self._pending is None else self._pending | mask
+        self._age[mask] = 0
+        self._in_startup = True
+
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
+                        y: FloatArray, valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        # the step already treated restarted systems as starting afresh
+        return self._last_xP[0][idx], self._last_xP[1][idx], None
+
+    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        x = super().step(y, u)
+        self.last_info.update(self._info)
+        return x
+
+    def _update(self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        return self._advance(y, None, valid)
+
+    def _predict_update(self, x: FloatArray, P: FloatArray | None, y: FloatArray,
+                        u: FloatArray, valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        return self._advance(y, u, valid)
+
+    def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
+                 ) -> tuple[FloatArray, FloatArray, None]:
+        bank, k, L = self._bank, self._k, self.horizon
+        assert bank is not None and self._nom is not None
+        nb, n = y.shape[0], self.model.n_x
+        filt = self.form == "filter"
+        fresh, self._pending = self._pending, None
+        if fresh is not None or self._in_startup:      # per system: window not yet full
+            start = self._age < L - filt
+            self._in_startup = bool(start.any())
+        else:
+            start = self._no_startup
+        w_out = max(0, k - L + filt) % L               # the oldest window: read out now
+        if k:                                          # nominal and perturbation time update
+            nom = self._nom.reshape(-1, n)
+            uu = u if self._nom.ndim == 2 else np.repeat(u, L, axis=0)
+            A = self._F(nom, uu)
+            self._nom = self._f(nom, uu).reshape(self._nom.shape)
+            A = A.reshape(self._nom.shape + (n,))
+            bank.predict(A, None, self._Qx)
+            if self._in_startup:                       # prior covariance along x0's nominal
+                A0 = A if A.ndim == 3 else A[:, w_out]
+                self._P_open = A0 @ self._P_open @ A0.swapaxes(1, 2) + (
+                    0.0 if self._Qx is None else self._Qx)
+        if fresh is not None:                          # restarted systems begin again at x0
+            x0 = np.broadcast_to(self._x0, (nb, n))[fresh]
+            self._nom[fresh] = x0 if self._nom.ndim == 2 else x0[:, None, :]
+            self._P_open[fresh] = np.broadcast_to(self._P0, (nb, n, n))[fresh]
+            bank.Z[fresh] = bank._fresh[None, :, None, :]
+        s = k % L
+        if not filt:
+            x, P, ok = self._readout(w_out, u, start)
+        if self._nom.ndim == 3:                        # re-anchor the window starting now
+            anchor = x if not filt else (self._f(self._x, u) if k else self._x)
+            if fresh is not None and filt:
+                anchor = np.where(fresh[:, None], self._nom[:, s], anchor)
+            self._nom[:, s] = anchor
+        bank.restart(s)
+        nom = self._nom.reshape(-1, n)
+        C, h = self._H(nom), self._h(nom)
+        if self._nom.ndim == 3:
+            C, dy = C.reshape(nb, L, *C.shape[1:]), y[:, None, :] - h.reshape(nb, L, -1)
+        else:
+            dy = y - h
+        bank.update(C, self._R, dy, None if valid is getattr(self, "_all_valid", 0) else valid)
+        if filt:
+            x, P, ok = self._readout(w_out, u, start)
+        self._age += 1
+        self._last_xP = (x, P)
+        self._info = {"startup": bool(start[0]) if self._single else start.copy(),
+                      "rank_deficient": (not ok[0]) if self._single else ~ok}
+        self._k_last = k
+        return x, P, None
+
+    def _nominal_of(self, w: int) -> FloatArray:
+        assert self._nom is not None
+        return self._nom if self._nom.ndim == 2 else self._nom[:, w]
+
+    def _readout(self, w: int, u: FloatArray | None, start: np.ndarray
+                 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
+        """Window ``w``'s estimate ``x_nom + δx̂``, with the documented fallback where singular."""
+        dx, P, ok = self._bank.estimate(w)             # type: ignore[union-attr]
+        x = (self._nom if self._nom.ndim == 2 else self._nom[:, w]) + dx  # type: ignore
+        if not ok.all():
+            xf, Pf = self._nominal_of(w), self._P_open    # start-up: x0's nominal, P0 along it
+            if self._k and not start.all():
+                A = self._F(self._x, u)
+                xp = self._f(self._x, u)
+                Pp = A @ self._P @ A.swapaxes(1, 2) + (0.0 if self._Qx is None else self._Qx)
+                xf = np.where(start[:, None], xf, xp)
+                Pf = np.where(start[:, None, None], Pf, Pp)
+            x = np.where(ok[:, None], x, xf)
+            P = np.where(ok[:, None, None], P, Pf)
+        return x, P, ok
+
+
+register_estimator("efir", ExtendedFIRFilter)
