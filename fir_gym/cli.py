@@ -47,8 +47,19 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _papers(text: str) -> list[str]:
+    papers = [p.strip() for p in text.split(",") if p.strip()]
+    known = ("000", "001", "002", "003", "004")
+    bad = [p for p in papers if p not in known]
+    if bad or not papers:
+        raise argparse.ArgumentTypeError(f"papers are among {','.join(known)}; got {text!r}")
+    return papers
+
+
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from .scenarios import SCENARIOS, episodes
+    from .scenarios.report import write_report
+    from .scenarios.runner import Runner
 
     out = Path(args.out) if args.out else None
     if out:
@@ -57,17 +68,21 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     headers, rows = episodes.summary_rows(summaries)
     print(f"Scripted episodes (one per environment, seed {args.seed})\n")
     print(format_table(headers, rows, markdown=args.markdown))
+    papers = [p for group in (args.paper or []) for p in group]
+    wanted = [name for name in SCENARIOS if not papers or name[-3:] in papers]
+    reports = []
+    with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
+                progress=not args.no_progress) as runner:
+        for name in wanted:
+            module = importlib.import_module(f"fir_gym.scenarios.{name}")
+            report = module.run(seed=args.seed, quick=args.quick, runs=args.runs, runner=runner)
+            if out and hasattr(module, "plot"):
+                module.plot(report, out)
+            reports.append(report)
+            print("\n" + report.to_text(markdown=args.markdown))
     if out:
-        (out / "episodes.md").write_text(format_table(headers, rows, markdown=True) + "\n")
-    wanted = SCENARIOS if not args.paper else tuple(f"paper{p}" for p in args.paper)
-    for name in wanted:
-        module = importlib.import_module(f"fir_gym.scenarios.{name}")
-        report = module.run(seed=args.seed, quick=args.quick)
-        print("\n" + report.to_text(markdown=args.markdown))
-        if out:
-            (out / f"{name}.md").write_text(report.to_text(markdown=True))
-    if out:
-        print(f"wrote the reports to {out}/")
+        path = write_report(out, reports, episodes_table=(headers, rows))
+        print(f"\nwrote {path}")
     return 0
 
 
@@ -152,9 +167,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=str, default=None, help="folder for Markdown reports")
     p.add_argument("--markdown", action="store_true", help="print Markdown tables")
     p.add_argument("--quick", action="store_true",
-                   help="small Monte Carlo sizes (a smoke test; the numbers are noisier)")
-    p.add_argument("--paper", action="append", choices=["000", "001", "002", "003", "004"],
-                   help="run only this paper's experiment (repeatable)")
+                   help="small Monte Carlo sizes, under a minute (the numbers are noisier)")
+    p.add_argument("--paper", action="append", type=_papers, metavar="000,001,...",
+                   help="run only these papers' experiments")
+    p.add_argument("--runs", type=int, default=None,
+                   help="Monte Carlo runs per experiment (default: each scenario's own)")
+    p.add_argument("--jobs", type=int, default=None, help="worker processes (joblib/dask)")
+    p.add_argument("--backend", default="serial", choices=["serial", "joblib", "dask"],
+                   help="where the Monte Carlo runs (default: this process)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of a Dask scheduler (with --backend dask; default: a local "
+                        "cluster)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("train", help="train a controller with stable-baselines3")

@@ -7,13 +7,19 @@ from fir_gym.cli import main
 
 
 def test_reproduce_prints_one_block_per_environment(capsys, tmp_path):
-    assert main(["reproduce", "--seed", "3", "--quick", "--paper", "003",
-                 "--out", str(tmp_path)]) == 0
+    assert main(["reproduce", "--seed", "3", "--quick", "--paper", "003", "--runs", "2",
+                 "--no-progress", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     for env_id in fir_gym.ENV_IDS:
         assert env_id.split("/")[-1] in out
-    assert (tmp_path / "episodes.md").read_text().startswith("| env")
-    assert "Paper 003" in out and (tmp_path / "paper003.md").is_file()
+    report = (tmp_path / "REPORT.md").read_text()
+    assert "## Scripted episodes" in report and "## Paper 003" in report
+    assert "Paper 001" not in out
+
+
+def test_reproduce_rejects_unknown_papers():
+    with pytest.raises(SystemExit):
+        main(["reproduce", "--paper", "007"])
 
 
 def test_list_names_every_environment(capsys):

@@ -70,7 +70,8 @@ def _label(h: float | None) -> str:
     return "Kalman" if h is None else f"FIR T={h:g}"
 
 
-def run(seed: int = 0, quick: bool = False, nominal: str = "perturbed") -> Report:
+def run(seed: int = 0, quick: bool = False, runs: int | None = None, runner: object = None,
+        nominal: str = "perturbed") -> Report:
     """Table 1 recomputed; ``quick`` uses coarser grids (100 steps per window). No randomness.
 
     ``seed`` is accepted for a uniform scenario interface; the table is deterministic.

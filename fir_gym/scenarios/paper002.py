@@ -94,13 +94,14 @@ def _scores(mc: MonteCarlo, est: np.ndarray, cov: np.ndarray) -> dict[str, Any]:
             "per_run": per_run}
 
 
-def run(seed: int = 0, quick: bool = False) -> Report:
+def run(seed: int = 0, quick: bool = False, runs: int | None = None,
+        runner: object = None) -> Report:
     """The Monte Carlo comparison (200 runs; 50 with ``quick``) as a :class:`Report`.
 
     ``figures`` holds ``ratio`` (RMSE of the BPF-KF over the CD-EKF's), the
     ``scores`` of every filter and the global recursion's ``breakdown`` times.
     """
-    n_runs = 50 if quick else 200
+    n_runs = runs or (50 if quick else 200)
     mc = simulate(n_runs, seed)
     cm = van_der_pol_continuous_model(mc.params)
     sdc = ContinuousModel(a=cm.a, J=lambda x, u: cm.A_of_x(x), A_of_x=cm.A_of_x, h=cm.h,

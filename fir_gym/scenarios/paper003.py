@@ -102,9 +102,10 @@ def backward_bias_law(episodes: Episodes) -> float:
     return (TRUE["M0"] * Et - J * sigma2 / DT) / (Et + sigma2) - TRUE["M0"]
 
 
-def run(seed: int = 0, quick: bool = False) -> Report:
+def run(seed: int = 0, quick: bool = False, runs: int | None = None,
+        runner: object = None) -> Report:
     """Reproduce Tables 4 and 5 (``quick``: 5 runs instead of 50)."""
-    runs = 5 if quick else 50
+    runs = runs or (5 if quick else 50)
     episodes = simulate(range(seed, seed + runs), seconds=1.0)
     report = Report("003", "UKF state and parameter estimation of a pendulum-slider")
     X, Y = episodes.X, episodes.Y
