@@ -6,7 +6,6 @@ import pytest
 from fir_gym.scenarios.runner import Runner
 from fir_gym.scenarios.runner import seeded_normals as noisy_task
 
-
 TASKS = [(seed, 2.0) for seed in range(7)]
 
 
