@@ -86,6 +86,17 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_speed(args: argparse.Namespace) -> int:
+    try:
+        module = importlib.import_module("fir_gym.benchmarks.speed")
+    except ModuleNotFoundError as err:
+        if err.name == "fir_gym.benchmarks.speed":
+            print("fir-gym speed is not available yet", file=sys.stderr)
+            return 2
+        raise
+    return int(module.main(args.args) or 0)
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     try:
         module = importlib.import_module(f"fir_gym.benchmarks.{args.name}")
@@ -219,6 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("speed", help="every speed figure in one run, as ratios to references",
+                       add_help=False)
+    p.add_argument("args", nargs=argparse.REMAINDER,
+                   help="options of the speed command (--json, --help, ...)")
+    p.set_defaults(func=_cmd_speed)
 
     p = sub.add_parser("bench", help="run a speed benchmark")
     p.add_argument("name", choices=BENCHMARKS)
