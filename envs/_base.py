@@ -54,6 +54,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     measurement_names: ClassVar[tuple[str, ...]] = ()
     #: physical meaning and unit of the single action component (documentation)
     action_names: ClassVar[tuple[str, ...]] = ()
+    #: the FIR window (measurements) a wrapper uses when the user gives none
+    default_horizon: ClassVar[int] = 10
 
     def __init__(
         self,

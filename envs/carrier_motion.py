@@ -124,6 +124,8 @@ class CarrierMotionEnv(PlantEnv):
     state_names: ClassVar[tuple[str, ...]] = ("deck", "deck_rate")
     measurement_names: ClassVar[tuple[str, ...]] = ("deck_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("compensator_offset",)
+    #: default FIR window (5 s: a long window against the heavy measurement noise)
+    default_horizon: ClassVar[int] = 50
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(

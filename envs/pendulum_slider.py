@@ -158,6 +158,8 @@ class PendulumSliderEnv(PlantEnv):
     measurement_names: ClassVar[tuple[str, ...]] = ("x_measured", "x_dot_measured",
                                                     "theta_measured", "theta_dot_measured")
     action_names: ClassVar[tuple[str, ...]] = ("force",)
+    #: default FIR window (20 ms at 1 kHz)
+    default_horizon: ClassVar[int] = 20
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
 
     def __init__(

@@ -11,10 +11,11 @@ from fir_gym.cli import main
 from fir_gym.training import RunConfig, evaluate, learning_curve, train
 
 
-@pytest.mark.parametrize(("env_id", "kind"), [("fir_gym/CarrierMotion-v0", "true"),
+@pytest.mark.parametrize(("env_id", "kind"), [("fir_gym/CarrierMotion-v0", "kf"),
+                                              ("fir_gym/Orbit-v0", "efir"),
                                               ("fir_gym/VanDerPol-v0", "measurement")])
 def test_train_then_evaluate_a_run_folder(tmp_path, env_id, kind):
-    config = RunConfig(env_id=env_id, observation_kind=kind, steps=1024, seed=0, n_envs=2,
+    config = RunConfig(env_id=env_id, observation_kind=kind, steps=2048, seed=0, n_envs=2,
                        env_kwargs={"max_episode_steps": 50})
     run = train(config, tmp_path / "run")
     for name in ("model.zip", "vecnormalize.pkl", "run.json"):
@@ -24,7 +25,7 @@ def test_train_then_evaluate_a_run_folder(tmp_path, env_id, kind):
     assert len(first.returns) == 2 and np.all(np.isfinite(first.returns))
     assert first.returns == second.returns           # fixed evaluation seeds: reproducible
     steps, means = learning_curve(run, bins=4)
-    assert len(steps) == 4 and np.any(np.isfinite(means))   # 20 finished 50-step episodes
+    assert len(steps) == 4 and np.any(np.isfinite(means))   # 40 finished 50-step episodes
 
 
 def test_bad_config_is_rejected():

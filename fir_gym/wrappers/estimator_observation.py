@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -46,11 +47,20 @@ def resolve_estimator(
         raise ValueError(f"{type(env.unwrapped).__name__} has no `{attribute}`: {cls.__name__} "
                          f"needs the plant's model (env.unwrapped.{attribute})")
     options = dict(options)
+    add_default_horizon(cls, getattr(env.unwrapped, "default_horizon", None), options)
     x0, P0 = default_prior(env)
     if x0 is not None:
         options.setdefault("x0", x0)
         options.setdefault("P0", P0)
     return cls(model, **options)
+
+
+def add_default_horizon(cls: type[Estimator], horizon: int | None,
+                        options: dict[str, Any]) -> None:
+    """Give a windowed filter the plant's ``default_horizon`` when the options have none."""
+    if (horizon is not None and "horizon" not in options
+            and "horizon" in inspect.signature(cls.__init__).parameters):
+        options["horizon"] = horizon
 
 
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -78,7 +88,8 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
             ``Dict`` with ``estimate`` and ``covariance``, the upper triangle of ``P``
             row by row, ``n_x (n_x + 1) / 2`` numbers) or ``"estimate+measurement"``
             (a ``Dict`` with ``estimate`` and ``measurement``).
-        **options: estimator options (``horizon=10``, ``alpha=1e-3``, ``x0``, ``P0``, ...).
+        **options: estimator options (``horizon=10``, ``alpha=1e-3``, ``x0``, ``P0``, ...);
+            a windowed filter without ``horizon`` gets the plant's ``default_horizon``.
 
     On ``reset`` the estimator is reset to its prior and consumes ``y[0]`` (an
     update only); on ``step(u)`` it consumes ``y[k]`` with the *applied* input

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from fir_gym.estimators import Estimator, estimator_class
 
-from .estimator_observation import OBSERVATION_KINDS, PRIOR_FLOOR
+from .estimator_observation import OBSERVATION_KINDS, PRIOR_FLOOR, add_default_horizon
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -60,6 +60,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             raise ValueError(f"this vector env's plant has no "
                              f"`{getattr(cls, 'model_attribute', 'model')}` for {cls.__name__}")
         options = dict(options)
+        add_default_horizon(cls, _plant_attr(env, "default_horizon"), options)
         x0, P0 = _plant_attr(env, "initial_state"), _plant_attr(env, "initial_state_cov")
         if x0 is not None and P0 is not None:
             x0 = np.asarray(x0, dtype=np.float64)

@@ -14,10 +14,12 @@ from fir_gym.estimators import make_estimator
 from fir_gym.wrappers import VectorEstimatorObservation
 
 
-def rollout(mode, env_id, name, n=3, max_steps=7, steps=25, seed=5):
+def rollout(mode, env_id, name, n=3, max_steps=7, steps=25, seed=5, **options):
+    """``steps`` wrapped vector steps with random actions, keeping observations and infos."""
     venv = gym.make_vec(env_id, num_envs=n, vectorization_mode=mode,
                         max_episode_steps=max_steps)
-    wrapped = VectorEstimatorObservation(venv, name, observation="estimate+measurement")
+    wrapped = VectorEstimatorObservation(venv, name, observation="estimate+measurement",
+                                         **options)
     obs, info = wrapped.reset(seed=seed)
     record = [(obs, info, np.zeros(n, bool))]
     rng = np.random.default_rng(0)
@@ -28,12 +30,18 @@ def rollout(mode, env_id, name, n=3, max_steps=7, steps=25, seed=5):
 
 
 @pytest.mark.parametrize("mode", ["sync", "vector_entry_point"])
-@pytest.mark.parametrize("name", ["kf", "ekf", "ukf"])
+@pytest.mark.parametrize("name", ["kf", "ekf", "ukf", "efir", "fir"])
 def test_equals_one_estimator_per_env_across_autoresets(mode, name):
-    env_id = "fir_gym/CarrierMotion-v0" if name == "kf" else "fir_gym/UncertainOscillator-v0"
-    wrapped, record = rollout(mode, env_id, name)
+    linear = name in ("kf", "fir")
+    env_id = "fir_gym/CarrierMotion-v0" if linear else "fir_gym/UncertainOscillator-v0"
+    windowed = name in ("efir", "fir")
+    # windows of 4 fill inside the 9-step episodes, so both start-up and full windows restart
+    wrapped, record = rollout(mode, env_id, name, max_steps=9 if windowed else 7,
+                              **({"horizon": 4} if windowed else {}))
     n = wrapped.num_envs
     prior = {"x0": wrapped.estimator._x0, "P0": wrapped.estimator._P0}
+    if windowed:
+        prior["horizon"] = 4
     model = gym.make(env_id).unwrapped.model
     filters = [make_estimator(name, model, **prior) for _ in range(n)]
     new_episode = np.ones(n, bool)
@@ -42,7 +50,7 @@ def test_equals_one_estimator_per_env_across_autoresets(mode, name):
         for i in range(n):
             y = obs["measurement"][i]
             if new_episode[i]:
-                filters[i].reset(**prior)
+                filters[i].reset(prior["x0"], prior["P0"])
                 expected = filters[i].step(y)
                 restarts += 1
             else:
