@@ -124,7 +124,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = RunConfig(env_id=args.env, observation_kind=args.estimator, algo=args.algo,
                        steps=args.steps, seed=args.seed, n_envs=args.n_envs,
                        observation=args.observation, estimator_kwargs=args.estimator_kwargs,
-                       env_kwargs=args.env_kwargs)
+                       env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs)
     out = train(config, args.out, progress_bar=not args.no_progress)
     result = evaluate(out, episodes=args.episodes)
     print(f"{args.env} observing {args.estimator}: return {result.mean:.4g} ± {result.std:.3g} "
@@ -148,8 +148,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     summary = compare_controllers(args.env, kinds, seeds, args.out, steps=args.steps,
                                   algo=args.algo, episodes=args.episodes,
                                   estimator_kwargs=args.estimator_kwargs,
-                                  env_kwargs=args.env_kwargs,
-                                  progress_bar=not args.no_progress)
+                                  env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs,
+                                  n_envs=args.n_envs, progress_bar=not args.no_progress)
     rows = [[s["observation"], s["mean"], s["std"],
              " ".join(f"{r:.4g}" for r in s["per_seed"])] for s in summary]
     table = format_table(["observation", "mean return", "std over seeds", "per seed"], rows)
@@ -201,7 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--algo", default="ppo", choices=["ppo", "sac"])
     p.add_argument("--steps", type=int, default=50_000)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-envs", type=int, default=4)
+    p.add_argument("--n-envs", type=int, default=8)
+    p.add_argument("--algo-kwargs", type=_json_dict, default={},
+                   help="JSON object of algorithm options (PPO defaults: see fir_gym.training)")
     p.add_argument("--episodes", type=int, default=20, help="evaluation episodes")
     p.add_argument("--estimator-kwargs", type=_json_dict, default={})
     p.add_argument("--env-kwargs", type=_json_dict, default={})
@@ -227,6 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator-kwargs", type=_json_dict, default={},
                    help="JSON object: estimator name -> its options")
     p.add_argument("--env-kwargs", type=_json_dict, default={})
+    p.add_argument("--algo-kwargs", type=_json_dict, default={})
+    p.add_argument("--n-envs", type=int, default=8)
     p.add_argument("--out", required=True)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_compare)

