@@ -149,3 +149,21 @@ def test_gym_make_true_state_shortcut_and_errors():
         gym.make("fir_gym/VanDerPol-v0", estimator_kwargs={"horizon": 3})
     with pytest.raises(ValueError, match="observation must be"):
         gym.make("fir_gym/VanDerPol-v0", observation="estimate")
+
+
+@pytest.mark.parametrize(("env_id", "name", "options"), [
+    ("fir_gym/Orbit-v0", "ekf", {"x0": [7.997, 1.992], "P0": 2 * np.eye(2)}),
+    ("fir_gym/Orbit-v0", "efir", {"horizon": 3}),
+    ("fir_gym/UncertainOscillator-v0", "ukf", {}),
+    ("fir_gym/CarrierMotion-v0", "kf", {}),
+])
+def test_registry_filters_in_the_wrapper_equal_the_filter_run_by_hand(env_id, name, options):
+    from fir_gym.estimators import make_estimator
+
+    wrapped = EstimatorObservation(gym.make(env_id), name, **options)
+    plain = gym.make(env_id)
+    by_hand = make_estimator(name, plain.unwrapped.model,
+                             **{**options, "x0": wrapped.estimator.x, "P0": wrapped.estimator.P})
+    for (x_hat, _), (y, info) in zip(run(wrapped, ACTIONS * 2), run(plain, ACTIONS * 2),
+                                     strict=True):
+        np.testing.assert_array_equal(x_hat, by_hand.step(y, info.get("action")))
