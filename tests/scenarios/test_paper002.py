@@ -10,8 +10,8 @@ from fir_gym.scenarios import paper002
 
 
 @pytest.fixture(scope="module")
-def report():
-    return paper002.run(seed=0, quick=True)
+def report(quick_report):
+    return quick_report("paper002")
 
 
 def test_bpf_kf_rmse_is_within_ten_percent_of_the_cd_ekf(report):
