@@ -3,9 +3,9 @@
 Subcommands:
 
 * ``fir-gym list`` — the registered environments and estimators;
-* ``fir-gym reproduce`` — the scripted benchmark episodes (for now: one scripted
-  episode per environment with a table of state and measurement statistics;
-  the papers' experiments are added as their estimators land);
+* ``fir-gym reproduce`` — one scripted episode per environment, then every
+  experiment of the five papers with the paper's numbers beside ours, and the
+  sweeps beyond them; ``--out DIR`` writes ``DIR/REPORT.md`` and its figures;
 * ``fir-gym bench NAME`` — a speed benchmark (ratios against a reference timed in
   the same run);
 * ``fir-gym train`` / ``evaluate`` / ``compare-controllers`` — controllers trained
@@ -49,10 +49,11 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 def _papers(text: str) -> list[str]:
     papers = [p.strip() for p in text.split(",") if p.strip()]
-    known = ("000", "001", "002", "003", "004")
+    known = ("000", "001", "002", "003", "004", "sweeps")
     bad = [p for p in papers if p not in known]
     if bad or not papers:
-        raise argparse.ArgumentTypeError(f"papers are among {','.join(known)}; got {text!r}")
+        raise argparse.ArgumentTypeError(f"experiments are among {','.join(known)}; "
+                                         f"got {text!r}")
     return papers
 
 
@@ -69,7 +70,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     print(f"Scripted episodes (one per environment, seed {args.seed})\n")
     print(format_table(headers, rows, markdown=args.markdown))
     papers = [p for group in (args.paper or []) for p in group]
-    wanted = [name for name in SCENARIOS if not papers or name[-3:] in papers]
+    wanted = [name for name in SCENARIOS
+              if not papers or name.removeprefix("paper") in papers]
     reports = []
     with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
                 progress=not args.no_progress) as runner:
@@ -173,14 +175,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("list", help="list environments and estimators")
     p.set_defaults(func=_cmd_list)
 
-    p = sub.add_parser("reproduce", help="run the scripted benchmark episodes")
+    p = sub.add_parser("reproduce", help="reproduce every experiment of the papers, side by side "
+                                          "with the paper, and the sweeps beyond them")
     p.add_argument("--seed", type=int, default=0, help="seed of every episode (default 0)")
     p.add_argument("--out", type=str, default=None, help="folder for Markdown reports")
     p.add_argument("--markdown", action="store_true", help="print Markdown tables")
     p.add_argument("--quick", action="store_true",
                    help="small Monte Carlo sizes, under a minute (the numbers are noisier)")
-    p.add_argument("--paper", action="append", type=_papers, metavar="000,001,...",
-                   help="run only these papers' experiments")
+    p.add_argument("--paper", action="append", type=_papers, metavar="000,001,...,sweeps",
+                   help="run only these papers' experiments (and/or the sweeps)")
     p.add_argument("--runs", type=int, default=None,
                    help="Monte Carlo runs per experiment (default: each scenario's own)")
     p.add_argument("--jobs", type=int, default=None, help="worker processes (joblib/dask)")
@@ -249,9 +252,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from threadpoolctl import threadpool_limits
+
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        # Every matrix here is small: a multi-threaded BLAS only adds thread hand-offs,
+        # and on a busy machine its spinning threads can make a 2x2 solve cost ms.
+        with threadpool_limits(limits=1, user_api="blas"):
+            return int(args.func(args))
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

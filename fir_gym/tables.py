@@ -19,6 +19,9 @@ def format_table(
     Numeric columns are right-aligned.
     """
     cells = [[_cell(v, floatfmt) for v in row] for row in rows]
+    if markdown:  # a literal | would end the cell
+        cells = [[c.replace("|", "\\|") for c in row] for row in cells]
+        headers = [h.replace("|", "\\|") for h in headers]
     for i, row in enumerate(cells):
         if len(row) != len(headers):
             raise ValueError(f"row {i} has {len(row)} cells; expected {len(headers)}")

@@ -22,6 +22,12 @@ def test_reproduce_rejects_unknown_papers():
         main(["reproduce", "--paper", "007"])
 
 
+def test_reproduce_paper_selection_includes_the_sweeps():
+    from fir_gym.cli import _papers
+
+    assert _papers("000,sweeps") == ["000", "sweeps"]
+
+
 def test_list_names_every_environment(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out

@@ -23,3 +23,10 @@ def test_markdown_table_and_empty_cells():
 def test_row_length_mismatch_raises():
     with pytest.raises(ValueError, match="row 0"):
         format_table(["a", "b"], [[1]])
+
+
+def test_markdown_cells_escape_pipes():
+    text = format_table(["|x|"], [["a | b"]], markdown=True)
+    header, _, row = text.splitlines()
+    assert header == "| \\|x\\|  |"          # padded to the width of the escaped cell
+    assert row == "| a \\| b |"
