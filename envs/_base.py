@@ -29,6 +29,7 @@ class does what must be identical everywhere:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar, SupportsFloat
 
@@ -131,6 +132,11 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         """Noisy measurement ``y = h(x) + v``, ``v ~ N(0, measurement_cov)``."""
         sqrt = self._measurement_sqrt
         noise = rng.standard_normal(x.shape[:-1] + (sqrt.shape[1],))
+        diag = getattr(self, "_sqrt_diagonal", None)
+        if diag is None or diag[0] is not sqrt:
+            diag = self._sqrt_diagonal = (sqrt, _diagonal_of(sqrt))
+        if diag[1] is not None:       # noise @ sqrt.T of a diagonal sqrt, bit for bit
+            return self._noise_free_measurement(x, extra) + noise * diag[1]
         return self._noise_free_measurement(x, extra) + noise @ sqrt.T
 
     def _sample_initial_state(self, rng: np.random.Generator, n: int | None = None) -> FloatArray:
@@ -192,9 +198,11 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         reward = float(self._reward(x, a, x_next))
         self.state = x_next
         self._last_extra = extra
-        info: dict[str, Any] = {"state": x_next.copy(), "action": a.copy(),
+        # ``a`` is a fresh array made by _check_action: no copy needed for info
+        info: dict[str, Any] = {"state": x_next.copy(), "action": a,
                                 "action_clipped": clipped, **extra}
-        if np.isfinite(x_next).all():
+        # a finite sum means every entry is finite (the exact test only when it is not)
+        if math.isfinite(sum(x_next.tolist())) or np.isfinite(x_next).all():
             obs = self._measure(x_next, extra, self.np_random)
         else:
             # A plant whose domain check is right never gets here; if parameters push
@@ -221,6 +229,14 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action: ArrayLike) -> tuple[FloatArray, bool]:
         shape = self.action_space.shape
+        if shape == (1,) and type(action) is np.ndarray and action.shape == shape \
+                and action.dtype.kind == "f":
+            # the common case, in floats: same checks, same result as below
+            v = action.item()
+            if not math.isfinite(v):
+                raise ValueError(f"action must be finite; got {action.astype(np.float64)}")
+            c = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+            return np.array((c,)), c != v
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
@@ -234,6 +250,18 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
             raise ValueError(f"action must be finite; got {a}")
         clipped = a.clip(-1.0, 1.0)
         return clipped, bool((clipped != a).any())
+
+
+def _diagonal_of(M: FloatArray) -> FloatArray | None:
+    """The diagonal of a square diagonal ``M``, else None.
+
+    For diagonal ``M``, ``v @ M.T`` is ``v * diag(M)`` exactly: each sum has one
+    non-zero product, and adding exact zeros changes nothing (in any order, with or
+    without fused multiply-adds).
+    """
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or np.count_nonzero(M - np.diag(np.diag(M))):
+        return None
+    return np.diag(M).copy()
 
 
 def psd_sqrt(M: FloatArray) -> FloatArray:

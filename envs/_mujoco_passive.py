@@ -41,3 +41,21 @@ def passive_force(law: ForceLaw | None) -> Iterator[None]:
             yield
         finally:
             mujoco.set_mjcb_passive(previous)
+
+
+def step(m: mujoco.MjModel, d: mujoco.MjData, nstep: int, law: ForceLaw | None) -> None:
+    """``nstep`` calls of ``mj_step`` with ``law`` installed as in :func:`passive_force`.
+
+    The same as ``with passive_force(law): for _ in range(nstep): mujoco.mj_step(m, d)``,
+    without the generator-based context manager (it runs at every env step).
+    """
+    if law is None:
+        mujoco.mj_step(m, d, nstep)
+        return
+    with _lock:
+        previous = mujoco.get_mjcb_passive()
+        mujoco.set_mjcb_passive(law)
+        try:
+            mujoco.mj_step(m, d, nstep)
+        finally:
+            mujoco.set_mjcb_passive(previous)

@@ -18,6 +18,10 @@ TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
 
 
+#: batches up to this size are propagated row by row in Python floats (faster than numpy)
+SMALL_BATCH = 32
+
+
 class OrbitDynamics:
     """Euler-discretised radial motion under gravity and radial thrust, one measurement interval.
 
@@ -40,6 +44,13 @@ class OrbitDynamics:
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
+        if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
+            # a few systems (e.g. a UKF's sigma points): row by row in floats, bit for bit
+            # the batched loop and ~10x faster where numpy's per-call cost dominates
+            U = np.broadcast_to(u, (x.shape[0], u.shape[-1]))
+            rows = [self.propagate(x[i], U[i], jacobian) for i in range(x.shape[0])]
+            return (np.array([r[0] for r in rows]),
+                    np.array([r[1] for r in rows]) if jacobian else None)
         if single:
             r, v = float(x.flat[0]), float(x.flat[1])
             a = float(np.asarray(u).flat[0]) * self.thrust_max

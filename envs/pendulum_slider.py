@@ -31,25 +31,69 @@ class PaperFrictionForce:
     ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
     force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
     ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``
-    gives ``F = (c₀ + c₁ θ̈₀) / (1 - c₁ [M⁻¹]_θx)``, computed from MuJoCo's own mass
-    matrix and bias forces at the stage's state.
+    gives ``F = (c₀ + c₁ θ̈₀) / (1 - c₁ [M⁻¹]_θx)``.
+
+    The callback runs at each of MuJoCo's four RK4 stages, so it is kept to float
+    arithmetic on two ``tolist`` reads: the 2-DOF mass matrix
+    ``M = [[m1 + m2, −m2 l cosθ], [−m2 l cosθ, I_c + m2 l²]]`` and bias forces
+    ``[m2 l sinθ θ̇², m2 g l sinθ]`` (Coriolis/centripetal and gravity) are those of this
+    MJCF model in closed form, and ``q̈₀ = M⁻¹ (qfrc_passive + qfrc_applied + gear·ctrl −
+    bias)`` takes MuJoCo's own passive (spring, hinge damping), applied and actuator
+    forces. :meth:`reference_force` computes the same force from MuJoCo's own bias
+    forces (``mj_rne``) and mass-matrix solve (``mj_solveM``); the tests check that
+    the two agree to round-off.
     """
 
     def __init__(self, model: mujoco.MjModel, mu: float, m1: float, m2: float, l: float,
-                 g: float) -> None:
+                 g: float, I_c: float) -> None:
         self.mu, self.weight, self.m2l = mu, (m1 + m2) * g, m2 * l
+        self.mt, self.J, self.m2gl = m1 + m2, I_c + m2 * l * l, m2 * g * l
         self.x_dof = int(model.jnt_dofadr[model.joint("x").id])
         self.th_dof = int(model.jnt_dofadr[model.joint("theta").id])
         self.th_qpos = int(model.jnt_qposadr[model.joint("theta").id])
         self.gear = float(model.actuator_gear[0, 0])
+        if model.nv != 2:
+            raise ValueError("PaperFrictionForce is for the 2-DOF pendulum slider")
         nv = model.nv
         self._bias = np.zeros(nv)
         self._rhs = np.zeros((2, nv))
         self._rhs[1, self.x_dof] = 1.0
         self._sol = np.zeros((2, nv))
+        #: the callback to install (a closure: cheaper for MuJoCo to call than this object)
+        self.callback = self._make_callback()
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        # called at every RK4 stage: kept to a few C calls and float arithmetic
+        self.callback(m, d)
+
+    def _make_callback(self) -> Any:
+        """The force law as a closure over its constants (called at every RK4 stage: a few
+        reads of the binding's arrays, float arithmetic, one write)."""
+        xd, td, tq = self.x_dof, self.th_dof, self.th_qpos
+        m2l, m2gl, mt, J, gear = self.m2l, self.m2gl, self.mt, self.J, self.gear
+        mu, weight, sin, cos = self.mu, self.weight, math.sin, math.cos
+        cache: list[Any] = [None, ()]
+
+        def callback(m: mujoco.MjModel, d: mujoco.MjData) -> None:
+            if d is not cache[0]:                        # views of this MjData, made once
+                cache[0], cache[1] = d, (d.qpos, d.qvel, d.qfrc_passive, d.qfrc_applied,
+                                         d.ctrl)
+            qpos, qvel, qfrc_passive, qfrc_applied, ctrl = cache[1]
+            th, w = qpos.item(tq), qvel.item(td)
+            passive, applied = qfrc_passive.tolist(), qfrc_applied.tolist()
+            s, c = sin(th), cos(th)
+            tau_x = passive[xd] + applied[xd] + gear * ctrl.item(0) - m2l * s * w * w
+            tau_t = passive[td] + applied[td] - m2gl * s
+            M12 = -m2l * c
+            det = mt * J - M12 * M12
+            thdd0 = (mt * tau_t - M12 * tau_x) / det     # θ̈ without the friction force
+            minv_tx = -M12 / det                         # [M⁻¹]_θx
+            c0 = -mu * (weight + m2l * c * w * w)
+            c1 = -mu * m2l * s
+            qfrc_passive[xd] = passive[xd] + (c0 + c1 * thdd0) / (1.0 - c1 * minv_tx)
+        return callback
+
+    def reference_force(self, m: mujoco.MjModel, d: mujoco.MjData) -> float:
+        """The same force from MuJoCo's ``mj_rne`` and ``mj_solveM`` (the callback's oracle)."""
         mujoco.mj_rne(m, d, 0, self._bias)           # bias forces at this stage's state
         rhs = self._rhs[0]
         np.subtract(d.qfrc_passive, self._bias, out=rhs)
@@ -60,8 +104,7 @@ class PaperFrictionForce:
         c0 = -self.mu * (self.weight + self.m2l * math.cos(th) * w * w)
         c1 = -self.mu * self.m2l * math.sin(th)
         sol = self._sol
-        force = (c0 + c1 * sol[0, self.th_dof]) / (1.0 - c1 * sol[1, self.th_dof])
-        d.qfrc_passive[self.x_dof] += force
+        return (c0 + c1 * sol[0, self.th_dof]) / (1.0 - c1 * sol[1, self.th_dof])
 
 
 class PendulumSliderEnv(PlantEnv):
@@ -254,8 +297,12 @@ class PendulumSliderEnv(PlantEnv):
         self._qpos = [int(m.jnt_qposadr[m.joint(n).id]) for n in ("x", "theta")]
         self._dof = [int(m.jnt_dofadr[m.joint(n).id]) for n in ("x", "theta")]
         self._z_rest = self._settle_vertical() if p["friction"] == "coulomb" else None
-        self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"])
+        self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"],
+                                                 p["I_c"])
                               if p["friction"] == "paper" else None)
+        # views into mj_data, read at every step (a view per attribute access costs more)
+        self._qpos_view, self._qvel_view = self.mj_data.qpos, self.mj_data.qvel
+        self._ctrl_view = self.mj_data.ctrl
         self._renderer: mujoco.Renderer | None = None
 
     def _settle_vertical(self) -> float:
@@ -278,9 +325,9 @@ class PendulumSliderEnv(PlantEnv):
         mujoco.mj_forward(m, d)
 
     def _read_state(self) -> FloatArray:
-        d = self.mj_data
-        return np.array([d.qpos[self._qpos[0]], d.qvel[self._dof[0]],
-                         d.qpos[self._qpos[1]], d.qvel[self._dof[1]]])
+        qpos, qvel = self._qpos_view, self._qvel_view
+        return np.array((qpos.item(self._qpos[0]), qvel.item(self._dof[0]),
+                         qpos.item(self._qpos[1]), qvel.item(self._dof[1])))
 
     # ------------------------------------------------------------------ plant hooks
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -295,10 +342,10 @@ class PendulumSliderEnv(PlantEnv):
             raise ValueError("PendulumSlider-v0 simulates one system; it has no batched path")
         force = float(a[0]) * self.params["force_max"]
         d = self.mj_data
-        d.ctrl[0] = force
-        with _mujoco_passive.passive_force(self._friction_law):
-            for _ in range(self.params["frame_skip"]):
-                mujoco.mj_step(self.mj_model, d)
+        self._ctrl_view[0] = force
+        law = self._friction_law
+        _mujoco_passive.step(self.mj_model, d, self.params["frame_skip"],
+                             None if law is None else law.callback)
         x_next = self._read_state()
         if self._has_process_noise:
             x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
@@ -310,12 +357,18 @@ class PendulumSliderEnv(PlantEnv):
         return x.copy()
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        cost = (x_next[2] ** 2 + 0.1 * x_next[3] ** 2 + 100.0 * (x_next[0] - self.x_rest) ** 2
-                + 0.01 * float(a[0]) ** 2)
-        return -float(cost) * self.params["frame_skip"] * 0.1
+        # Python floats: the same IEEE operations as on numpy scalars (``**`` is libm's pow
+        # for both), without numpy's per-scalar overhead
+        p, _, th, w = x_next.tolist()
+        cost = (th ** 2 + 0.1 * w ** 2 + 100.0 * (p - self.x_rest) ** 2
+                + 0.01 * a.item(0) ** 2)
+        return -cost * self.params["frame_skip"] * 0.1
 
     def _in_domain(self, x: FloatArray) -> bool:
-        return bool(np.isfinite(x).all() and abs(x[0] - self.params["l0"]) <= 0.3)
+        if x.ndim != 1:
+            return bool(np.isfinite(x).all() and abs(x[0] - self.params["l0"]) <= 0.3)
+        xs = x.tolist()
+        return all(map(math.isfinite, xs)) and abs(xs[0] - self.params["l0"]) <= 0.3
 
     @staticmethod
     def _make_dynamics(params: Mapping[str, Any]) -> PendulumSliderDynamics:

@@ -181,6 +181,12 @@ class PendulumSliderDynamics:
         _, Fz, Fp = self.propagate(x, u, theta, jacobian=True)
         return Fz, Fp
 
+    def f_jac_f(self, x: FloatArray, u: FloatArray, theta: FloatArray
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``f`` and its Jacobians in one RK4 pass (``f`` is computed the same either way)."""
+        z, Fz, Fp = self.propagate(x, u, theta, jacobian=True)
+        return z, Fz, Fp                                        # type: ignore[return-value]
+
     def f(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.f_theta(x, u, self.theta)
 
@@ -279,4 +285,5 @@ class PendulumSliderDynamics:
         return ParametricModel(f=self.f_theta, h=self.h_theta,
                                params={"mu": self.mu, "M0": self.M0}, Q=Q_, R=R, dt=self.dt,
                                jac_f=self.jac_f, jac_h=self.jac_h, n_u=1,
-                               name=name or f"PendulumSlider({self.friction})")
+                               name=name or f"PendulumSlider({self.friction})",
+                               f_jac_f=self.f_jac_f)

@@ -17,6 +17,8 @@ from . import _draw
 from ._base import PlantEnv
 
 NOISE_INPUT = np.array([1.0, 1.0])
+#: batches up to this size are integrated row by row in Python floats (faster than numpy)
+SMALL_BATCH = 32
 
 
 class VanDerPolDynamics:
@@ -71,6 +73,8 @@ class VanDerPolDynamics:
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
+        if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
+            return self._integrate_rows(x, u, dW, jacobian)
         if single:
             x1, x2 = float(x.flat[0]), float(x.flat[1])
             force = float(np.asarray(u).flat[0]) * self.u_max
@@ -117,6 +121,21 @@ class VanDerPolDynamics:
         Phi = np.stack([np.stack(np.broadcast_arrays(p11, p12), -1),
                         np.stack(np.broadcast_arrays(p21, p22), -1)], -2)
         return x_end, x1_mean, Phi
+
+    def _integrate_rows(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
+                        jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """A small batch ``(B, 2)`` row by row on the float path (e.g. a UKF's sigma points).
+
+        Bit for bit the batched loop (the same operations in the same order on each row),
+        and about ten times faster below :data:`SMALL_BATCH` rows, where numpy's per-call
+        cost dominates the ~30 array operations of each Heun step.
+        """
+        U = np.broadcast_to(u, (x.shape[0], u.shape[-1]))
+        rows = [self.integrate(x[i], U[i], None if dW is None else dW[:, i], jacobian)
+                for i in range(x.shape[0])]
+        x_end = np.array([r[0] for r in rows])
+        x1_mean = np.array([r[1] for r in rows], dtype=np.float64)
+        return x_end, x1_mean, np.array([r[2] for r in rows]) if jacobian else None
 
     def f(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.integrate(x, u)[0]

@@ -93,7 +93,11 @@ class WindowBank:
         if valid is not None and not valid.all():
             g = g * valid[:, None, None, None]
         for q in range(p):                                      # Z −= [K; W] ⊗ r
-            Z -= g[:, q].swapaxes(1, 2)[..., None] * r[:, q:q + 1]
+            # g repeated along the last axis first: numpy's broadcast of a length-1 last
+            # axis runs one 7-element inner loop per (b, i, w), ~3x slower than this
+            G = np.repeat(g[:, q].swapaxes(1, 2)[..., None], r.shape[-1], axis=3)
+            G *= r[:, q:q + 1]
+            Z -= G
 
     def predict(self, A: FloatArray, Bu: FloatArray | None, Qx: FloatArray | None) -> None:
         """Time update ``x̄ ← A x̄ + B u``, ``T ← A T``, ``P ← A P Aᵀ + GQGᵀ`` of every window.
@@ -105,8 +109,10 @@ class WindowBank:
         Z[:, :n] = _lmul(A, Z[:, :n])
         if Qx is not None:
             P = Z[:, :n, :, :n]
-            if A.ndim == 3:
-                P = P @ A.swapaxes(-1, -2)[:, None]
+            if A.ndim == 3:                 # one (n·W x n) @ (n x n) product per system
+                B_, W_ = P.shape[0], P.shape[2]
+                P = (P.reshape(B_, n * W_, n) @ np.ascontiguousarray(A.swapaxes(-1, -2))
+                     ).reshape(B_, n, W_, n)
             else:
                 P = (P.swapaxes(1, 2) @ A.swapaxes(-1, -2)).swapaxes(1, 2)
             Z[:, :n, :, :n] = P + (Qx[..., :, None, :] if Qx.ndim == 3 else Qx[:, None, :])
@@ -136,7 +142,7 @@ class WindowBank:
         T = Zs[:, :n, n:2 * n]
         TFi = T @ Fi
         return (Zs[:, :n, 2 * n] + (TFi @ b)[..., 0],
-                Zs[:, :n, :n] + TFi @ T.swapaxes(1, 2), regular)
+                Zs[:, :n, :n] + TFi @ np.ascontiguousarray(T.swapaxes(1, 2)), regular)
 
 
 _FROBENIUS_LIMIT = RANK_RTOL ** -2

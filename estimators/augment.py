@@ -44,6 +44,9 @@ class ParametricModel(StateSpaceModel):
         jac_f: optional ``jac_f(x, u, theta) -> (∂f/∂x, ∂f/∂θ)`` of shapes
             ``(..., n_x, n_x)`` and ``(..., n_x, n_θ)``; central differences otherwise.
         jac_h: optional ``jac_h(x, theta) -> (∂h/∂x, ∂h/∂θ)``.
+        f_jac_f: optional ``f_jac_f(x, u, theta) -> (f, ∂f/∂x, ∂f/∂θ)`` computed together
+            (one pass of an integrator that yields its Jacobians); it must equal ``f``
+            and ``jac_f``. The nominal model then has a fused ``linearize``.
 
     As a :class:`StateSpaceModel` it behaves as the model at the nominal ``θ``
     (``f(x, u) = f(x, u, θ_nominal)``); :meth:`with_params` moves the nominal.
@@ -53,8 +56,11 @@ class ParametricModel(StateSpaceModel):
                  Q: ArrayLike, R: ArrayLike, dt: float = 1.0,
                  jac_f: Callable[..., tuple[FloatArray, FloatArray]] | None = None,
                  jac_h: Callable[..., tuple[FloatArray, FloatArray]] | None = None,
-                 G: ArrayLike | None = None, n_u: int = 0, name: str | None = None) -> None:
-        for arg, fn in (("f", f), ("h", h), ("jac_f", jac_f), ("jac_h", jac_h)):
+                 G: ArrayLike | None = None, n_u: int = 0, name: str | None = None,
+                 f_jac_f: Callable[..., tuple[FloatArray, FloatArray, FloatArray]] | None = None
+                 ) -> None:
+        for arg, fn in (("f", f), ("h", h), ("jac_f", jac_f), ("jac_h", jac_h),
+                        ("f_jac_f", f_jac_f)):
             if fn is not None and not callable(fn):
                 raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
         if not isinstance(params, Mapping) or not params:
@@ -66,8 +72,10 @@ class ParametricModel(StateSpaceModel):
         self.theta = theta
         self.theta.setflags(write=False)
         self._pf, self._ph, self._jac_f, self._jac_h = f, h, jac_f, jac_h
+        self._f_jac_f = f_jac_f
         super().__init__(f=self._nominal_f, h=self._nominal_h, Q=Q, R=R, dt=dt,
-                         F=self._nominal_F, H=self._nominal_H, G=G, n_u=n_u, name=name)
+                         F=self._nominal_F, H=self._nominal_H, G=G, n_u=n_u, name=name,
+                         fF=None if f_jac_f is None else self._nominal_fF)
 
     @property
     def params(self) -> dict[str, float]:
@@ -120,6 +128,10 @@ class ParametricModel(StateSpaceModel):
     def _nominal_f(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self._pf(x, u, self.theta)
 
+    def _nominal_fF(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        z, Fz, _ = self._f_jac_f(x, u, self.theta)
+        return z, Fz
+
     def _nominal_h(self, x: FloatArray) -> FloatArray:
         return self._ph(x, self.theta)
 
@@ -132,7 +144,7 @@ class ParametricModel(StateSpaceModel):
     def _constructor_kwargs(self) -> dict[str, Any]:
         return {"f": self._pf, "h": self._ph, "params": self.params, "Q": self.Q, "R": self.R,
                 "dt": self.dt, "jac_f": self._jac_f, "jac_h": self._jac_h, "G": self.G,
-                "n_u": self.n_u, "name": self.name}
+                "n_u": self.n_u, "name": self.name, "f_jac_f": self._f_jac_f}
 
 
 class AugmentedModel(StateSpaceModel):

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -123,6 +124,8 @@ class Estimator(ABC):
         self._nis_run: np.ndarray | None = None
         self._fresh: np.ndarray | None = None
         self._restarting = False
+        self._lean: Any = None
+        self._lean_cache: tuple[Any, ...] = (None, None, (), ())
         self.last_info: dict[str, Any] = {}
         self._reset_state()
 
@@ -176,6 +179,11 @@ class Estimator(ABC):
         warnings are silenced inside the hooks: a diverging filter is reported
         through :attr:`diverged`, not through ``RuntimeWarning``.
         """
+        lean = self._lean
+        if lean is not None and self._k:
+            out = lean(y, u)
+            if out is not None:
+                return out
         n_y = self._n_y
         Y = np.asarray(y, dtype=np.float64)
         if Y.ndim == 2 and Y.shape[1] == n_y:
@@ -294,10 +302,26 @@ class Estimator(ABC):
         self._all_valid.setflags(write=False)
         self._no_input = np.zeros((n_batch, self.model.n_u))
         self._no_input.setflags(write=False)
+        self._lean_u0 = [0.0] * self.model.n_u
         self._init_batch(n_batch)
+        self._lean = self._make_lean() if self._single else None
 
     def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
         """Hook: allocate per-system state once the batch size is known."""
+
+    # ------------------------------------------------------------------ single-system fast path
+    def _make_lean(self) -> Callable[[Any, Any], FloatArray | None] | None:
+        """Hook: a fast step for one system, ``(y, u) -> x̂`` or ``None`` (general path).
+
+        Called once the batch is known to be a single system. The returned function
+        must compute what :meth:`_predict_update` + :meth:`_accept` would, to
+        round-off (the tests check 1e-12), and must not change any state before it
+        commits (:func:`~._lean.commit`); returning ``None`` hands the step to the
+        general path (a NaN measurement, an unusual shape, a covariance that is not
+        positive definite, a divergence test that fails, ...). It runs only after
+        the first step (the first step is an update only, on the general path).
+        """
+        return None
 
     def _check_u(self, u: ArrayLike, n_batch: int) -> FloatArray:
         n_u = self.model.n_u

@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike
 from ._fir_bank import WindowBank
 from ._validation import FloatArray, as_covariance, positive
 from .base import Estimator
-from .extended import model_callables
+from .extended import model_callables, model_linearizer
 from .model import StateSpaceModel
 from .registry import register_estimator
 
@@ -97,6 +97,7 @@ class ExtendedFIRFilter(Estimator):
         self._Qx = Qx if np.any(Qx) else None
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, self._F, self._h, self._H = model_callables(model)
+        self._linearize = model_linearizer(model)
 
     @property
     def x_nominal(self) -> FloatArray | None:
@@ -166,8 +167,8 @@ class ExtendedFIRFilter(Estimator):
         if k:                                          # nominal and perturbation time update
             nom = self._nom.reshape(-1, n)
             uu = u if self._nom.ndim == 2 else np.repeat(u, L, axis=0)
-            A = self._F(nom, uu)
-            self._nom = self._f(nom, uu).reshape(self._nom.shape)
+            nom_next, A = self._linearize(nom, uu)      # f and F in one pass of the plant
+            self._nom = nom_next.reshape(self._nom.shape)
             A = A.reshape(self._nom.shape + (n,))
             bank.predict(A, None, self._Qx)
             if self._in_startup:                       # prior covariance along x0's nominal
@@ -216,8 +217,7 @@ class ExtendedFIRFilter(Estimator):
         if not ok.all():
             xf, Pf = self._nominal_of(w), self._P_open    # start-up: x0's nominal, P0 along it
             if self._k and not start.all():
-                A = self._F(self._x, u)
-                xp = self._f(self._x, u)
+                xp, A = self._linearize(self._x, u)
                 Pp = A @ self._P @ A.swapaxes(1, 2) + (0.0 if self._Qx is None else self._Qx)
                 xf = np.where(start[:, None], xf, xp)
                 Pf = np.where(start[:, None, None], Pf, Pp)

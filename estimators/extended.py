@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _lean, _small
 from ._validation import FloatArray
 from .base import Estimator
 from .kalman import predict_covariance, update_kernel
-from .model import StateSpaceModel
+from .model import LinearModel, StateSpaceModel
 from .registry import register_estimator
 
 __all__ = ["ExtendedKalmanFilter", "model_callables", "model_linearizer"]
@@ -63,6 +64,9 @@ class ExtendedKalmanFilter(Estimator):
             use :class:`~fir_gym.estimators.kalman.KalmanFilter`).
         x0, P0: prior of ``x[0]``.
         **options: those of :class:`~fir_gym.estimators.base.Estimator`.
+
+    One system of ``n_x, n_y <= 4`` with analytic Jacobians steps through generated
+    float kernels (:mod:`~._lean`), to round-off the same numbers.
     """
 
     name = "ekf"
@@ -77,6 +81,12 @@ class ExtendedKalmanFilter(Estimator):
         self._linearize = model_linearizer(model)
         self._GQGt = model.GQGT
 
+    def _make_lean(self) -> Any:
+        if not _small.same_hooks(self, ExtendedKalmanFilter):
+            return None
+        plain = _is_plain_linear(self.model, self._f, self._F, self._h, self._H)
+        return _lean.extended(self, plain)
+
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         e = y - self._h(x)
@@ -90,6 +100,17 @@ class ExtendedKalmanFilter(Estimator):
         e = y - self._h(x)
         x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
         return x, P, nis
+
+
+def _is_plain_linear(model: StateSpaceModel, f: Any, F: Any, h: Any, H: Any) -> bool:
+    """Whether the callables are :class:`LinearModel`'s own (``A x + B u``, ``A``, ``C x``,
+    ``C``)."""
+    if not isinstance(model, LinearModel) or type(model).linearize is not LinearModel.linearize:
+        return False
+    own = (LinearModel._linear_f, LinearModel._linear_F, LinearModel._linear_h,
+           LinearModel._linear_H)
+    return all(getattr(c, "__func__", None) is o and getattr(c, "__self__", None) is model
+               for c, o in zip((f, F, h, H), own, strict=True))
 
 
 register_estimator("ekf", ExtendedKalmanFilter)

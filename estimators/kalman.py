@@ -25,7 +25,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kalman_linalg import constant_or_batch, eye, rmul, spd_inverse, symmetrize
+from . import _lean, _small
+from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
 from .model import StateSpaceModel
@@ -57,7 +58,7 @@ def predict_covariance(P: FloatArray, F: FloatArray, Q: FloatArray) -> FloatArra
         Ft = F.T
         P = rmul(rmul(P, Ft).mT, Ft) + Q      # (F (F P)ᵀ)ᵀ = F P Fᵀ for symmetric P
     else:
-        P = F @ P @ F.mT + Q
+        P = mul_t(F @ P, F) + Q
     return symmetrize(P)
 
 
@@ -83,13 +84,13 @@ def gain_kernel(P: FloatArray, H: FloatArray, R: FloatArray
         PHt = rmul(P, H.T)                              # (B, n, m)
         S = rmul(PHt.mT, H.T) + R                       # H P Hᵀ + R (P symmetric)
     else:
-        PHt = P @ H.mT
+        PHt = mul_t(P, H)
         S = H @ PHt + R
     W = spd_inverse(S)
     K = PHt @ W
     IKH = eye(n) - (rmul(K, H) if H.ndim == 2 else K @ H)
     KR = rmul(K, R) if R.ndim == 2 else K @ R
-    return K, W, symmetrize(IKH @ P @ IKH.mT + KR @ K.mT)
+    return K, W, symmetrize(mul_t(IKH @ P, IKH) + mul_t(KR, K))
 
 
 def correct(x: FloatArray, e: FloatArray, K: FloatArray, W: FloatArray
@@ -237,6 +238,9 @@ class KalmanFilter(Estimator):
       updated. Estimates differ from the full recursion at the round-off level
       (about 1e-16 relative). A skipped measurement, a divergence repair or
       ``reset`` leaves that regime.
+
+    One system of ``n_x, n_y <= 4`` steps through generated float kernels
+    (:mod:`~._lean`): the same recursion and shortcuts, to round-off.
     """
 
     name = "kf"
@@ -263,6 +267,10 @@ class KalmanFilter(Estimator):
 
     def _reset_state(self) -> None:
         self._steady: tuple[FloatArray, ...] | None = None
+        self._lean_steady: tuple[Any, ...] | None = None
+
+    def _make_lean(self) -> Any:
+        return _lean.kalman(self) if _small.same_hooks(self, KalmanFilter) else None
 
     def _init_batch(self, n_batch: int) -> None:
         if self._P0.ndim == 2 and n_batch > 1:        # one covariance for the whole batch

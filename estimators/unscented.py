@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _lean, _small
 from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
@@ -247,6 +248,10 @@ class UnscentedKalmanFilter(Estimator):
             as paper 003's Table 2 (and filterpy) do.
         jitter: opt-in relative diagonal loading before each factorisation (default 0).
         **options: those of :class:`~fir_gym.estimators.base.Estimator`.
+
+    One system of ``n_x, n_y <= 4`` whose sigma-point weights stay below
+    :data:`~._lean.MAX_WEIGHT` (e.g. α = 1, or cubature points) steps through generated
+    float kernels (:mod:`~._lean`), to round-off the same numbers.
     """
 
     name = "ukf"
@@ -271,6 +276,9 @@ class UnscentedKalmanFilter(Estimator):
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, _, self._h, _ = model_callables(model)
         self._GQGt = model.GQGT
+
+    def _make_lean(self) -> Any:
+        return _lean.unscented(self) if _small.same_hooks(self, UnscentedKalmanFilter) else None
 
     def _draw(self, x: FloatArray, P: FloatArray) -> FloatArray:
         return self.points.points(x, matrix_sqrt(P, self.jitter))

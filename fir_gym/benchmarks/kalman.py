@@ -84,8 +84,9 @@ def _time(step: Callable[[int], Any], n: int, warmup: int) -> float:
     return best * 1e6
 
 
-def _ours(cls: type, model: StateSpaceModel, batch: int, n: int, skip: bool = False,
-          **opts: Any) -> float:
+def ours_stepper(cls: type, model: StateSpaceModel, batch: int, skip: bool = False,
+                 **opts: Any) -> Callable[[int], Any]:
+    """``step(k)``: one step of our filter on ``batch`` systems (1: one system, ``(n_y,)``)."""
     rng = np.random.default_rng(0)
     shape = (batch, model.n_y) if batch > 1 else (model.n_y,)
     Y = rng.normal(size=(64, *shape)) * 0.1
@@ -94,11 +95,19 @@ def _ours(cls: type, model: StateSpaceModel, batch: int, n: int, skip: bool = Fa
     flt = cls(model, **opts)
     missing = np.full(shape, np.nan)
     if skip:
-        return _time(lambda k: flt.step(missing if k % 1000 == 0 else Y[k % 64]), n, 200) / batch
-    return _time(lambda k: flt.step(Y[k % 64]), n, 2000 if batch == 1 else 50) / batch
+        return lambda k: flt.step(missing if k % 1000 == 0 else Y[k % 64])
+    return lambda k: flt.step(Y[k % 64])
 
 
-def _filterpy(kind: str, model: StateSpaceModel, n: int, alpha: float) -> float | None:
+def _ours(cls: type, model: StateSpaceModel, batch: int, n: int, skip: bool = False,
+          **opts: Any) -> float:
+    step = ours_stepper(cls, model, batch, skip, **opts)
+    return _time(step, n, 200 if skip else (2000 if batch == 1 else 50)) / batch
+
+
+def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float
+                     ) -> Callable[[int], Any] | None:
+    """``step(k)``: one predict + update of filterpy's filter on ``model`` (None: no filterpy)."""
     try:
         from filterpy.kalman import (
             ExtendedKalmanFilter as FpEKF,
@@ -124,7 +133,7 @@ def _filterpy(kind: str, model: StateSpaceModel, n: int, alpha: float) -> float 
         def step(k: int) -> None:
             kf.predict()
             kf.update(Y[k % 64])
-        return _time(step, n, 2000)
+        return step
     if kind == "ekf":
         ekf = FpEKF(dim_x=model.n_x, dim_z=model.n_y)
         ekf.Q, ekf.R = model.GQGT.copy(), model.R.copy()
@@ -136,7 +145,7 @@ def _filterpy(kind: str, model: StateSpaceModel, n: int, alpha: float) -> float 
             ekf.P = ekf.F @ ekf.P @ ekf.F.T + ekf.Q
             ekf.update(Y[k % 64][:, None], lambda z: model.H(z[:, 0]),
                        lambda z: model.h(z[:, 0])[:, None])
-        return _time(step, n, 2000)
+        return step
     points = MerweScaledSigmaPoints(model.n_x, alpha=alpha, beta=2.0, kappa=0.0)
     ukf = FpUKF(dim_x=model.n_x, dim_z=model.n_y, dt=model.dt, points=points,
                 fx=lambda x, dt: model.f(x, u0), hx=model.h)
@@ -145,7 +154,12 @@ def _filterpy(kind: str, model: StateSpaceModel, n: int, alpha: float) -> float 
     def step(k: int) -> None:
         ukf.predict()
         ukf.update(Y[k % 64])
-    return _time(step, n, 500)
+    return step
+
+
+def _filterpy(kind: str, model: StateSpaceModel, n: int, alpha: float) -> float | None:
+    step = filterpy_stepper(kind, model, alpha)
+    return None if step is None else _time(step, n, 2000 if kind != "ukf" else 500)
 
 
 def run(n: int = 5000, batch: int = 1024, n_batched: int = 200, alpha: float = 1.0

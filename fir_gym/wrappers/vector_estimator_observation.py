@@ -121,10 +121,13 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         info["estimate"], info["_estimate"] = x_hat.copy(), everyone
         if "state" in info:
             mask = info.get("_state", everyone)
-            info["estimation_error"] = np.where(mask[:, None], np.asarray(info["state"]) - x_hat,
-                                                np.nan)
+            error = np.asarray(info["state"]) - x_hat
+            info["estimation_error"] = error if mask.all() else np.where(mask[:, None], error,
+                                                                         np.nan)
             info["_estimation_error"] = mask
-        info["estimator_diverged"] = np.asarray(self.estimator.diverged, dtype=bool).copy()
+        diverged = self.estimator.diverged                # a fresh array (or a bool)
+        info["estimator_diverged"] = diverged if isinstance(diverged, np.ndarray) else \
+            np.full(self.num_envs, bool(diverged))
         info["_estimator_diverged"] = everyone
         return info
 

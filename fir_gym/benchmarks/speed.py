@@ -1,0 +1,386 @@
+"""Every speed figure of fir-gym in one run, as ratios to references timed in the same run.
+
+``fir-gym speed [SECTION ...] [--json PATH] [--quick]`` (or
+``python scripts/bench_speed.py ...``; sections ``kalman estimators envs wrappers``, default
+all) prints five sections:
+
+1. **kalman** — KF, EKF and UKF on issue 3's two models (2-state/1-output linear,
+   4-state/2-output nonlinear), single system and batched at B = 1024, beside
+   filterpy's filters on the same models when filterpy is installed: ours /
+   filterpy per step (targets: KF, EKF ≤ 1; UKF ≤ 0.5) and the batched throughput
+   over looping filterpy (target ≥ 25; batched KF/EKF ≤ 0.5 µs, UKF ≤ 2 µs per
+   system-step). The EFIR (n = 3, N = 10, paper 000's sim 2) against the EKF on the
+   same model, and batched (target ≤ 5 µs per system-step).
+2. **estimators** — every registered estimator on every plant's model where it
+   applies: µs per step of one system, and per system-step at B = 1, 64, 1024 and
+   16384 (a batch of one is the general batched code; "single" is one system given
+   as ``(n_y,)``), with the batched speed-up over the single system.
+3. **envs** — steps per second of every plant (unwrapped, through ``gym.make``,
+   Gymnasium's sync vector env, the native vector env at 64 and 1024 sub-envs) and
+   Gymnasium's references (``CartPole-v1`` single, sync and native vector;
+   ``InvertedPendulum-v5``): PendulumSlider-v0 / InvertedPendulum-v5 (target ≥ 1)
+   and native / sync vector speed-ups (VanDerPol-v0 at 1024 envs: target ≥ 100).
+4. **wrappers** — ``EstimatorObservation`` with an EKF over one env and
+   ``VectorEstimatorObservation`` with a batched EKF over 64 sub-envs of the sync
+   and the native vector env: wrapped / bare step time (target ≤ 1.2 for the vector
+   wrapper).
+5. **targets** — the targets above, measured, met or not.
+
+Every figure is the best of a few timed blocks (the least disturbed by other load
+on the machine); compare ratios from one run, not times across runs. Set
+``OPENBLAS_NUM_THREADS=1``: multi-threaded BLAS on tiny matrices only adds noise.
+The default run takes a few minutes; ``--quick`` about a tenth of that.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from .. import ENV_IDS, VECTOR_ENV_IDS
+from ..tables import format_table
+from . import estimators as est_bench
+from . import fir as fir_bench
+from . import kalman as kalman_bench
+from ._timing import counting, env_stepper, interleaved, stepper, vector_stepper
+
+SECTIONS = ("kalman", "estimators", "envs", "wrappers")
+
+
+# ---------------------------------------------------------------------------- timing
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None or b == 0 else a / b
+
+
+# ---------------------------------------------------------------------------- 1. kalman
+KALMAN_CASES = (("linear", "kf", "KalmanFilter", {}),
+                ("linear", "kf-full", "KalmanFilter", {"skip": True}),
+                ("linear", "ekf", "ExtendedKalmanFilter", {}),
+                ("linear", "ukf", "UnscentedKalmanFilter", {"alpha": 1.0}),
+                ("nonlinear", "ekf", "ExtendedKalmanFilter", {}),
+                ("nonlinear", "ukf", "UnscentedKalmanFilter", {"alpha": 1.0}))
+
+
+def kalman_section(quick: bool) -> dict[str, Any]:
+    """Issue 3's models against filterpy, and the EFIR against the EKF (issue 4's model).
+
+    Ours (one system), filterpy and ours batched at B = 1024 are timed in alternating
+    blocks, so their ratios hold under a changing load.
+    """
+    from fir_gym import estimators as est
+
+    calls, big_calls, reps = (200, 3, 5) if quick else (1000, 10, 12)
+    models = kalman_bench.models()
+    rows = []
+    for mname, fname, cname, opts in KALMAN_CASES:
+        model, cls = models[mname], getattr(est, cname)
+        opts = dict(opts)
+        skip = bool(opts.pop("skip", False))
+        ours = kalman_bench.ours_stepper(cls, model, 1, skip, **opts)
+        big = kalman_bench.ours_stepper(cls, model, 1024, skip, **opts)
+        for k in range(2000):                           # past the transient (KF steady state)
+            ours(k + 1)
+        for k in range(20):
+            big(k + 1)
+        runs = {"ours": (counting(ours), calls), "big": (counting(big), big_calls)}
+        fp = kalman_bench.filterpy_stepper(fname.split("-")[0], model, opts.get("alpha", 1.0))
+        if fp is not None:
+            runs["filterpy"] = (counting(fp), max(calls // 4, 50))
+        t = interleaved(runs, reps)
+        single, batched = 1e6 * t["ours"], 1e6 * t["big"] / 1024
+        ref = 1e6 * t["filterpy"] if "filterpy" in t else None
+        rows.append({"model": model.name, "filter": fname, "single_us": single,
+                     "batched_us": batched, "filterpy_us": ref, "ratio": _ratio(single, ref),
+                     "throughput_vs_filterpy": _ratio(ref, batched)})
+    efir = fir_bench.speed(steps=200 if quick else 500, repeats=5 if quick else 15)
+    eb = _efir_batched(quick)
+    efir_row = {"efir_us": 1e6 * efir["efir"], "ekf_us": 1e6 * efir["ekf"],
+                "efir_over_ekf": efir["ratio"], **eb}
+    return {"rows": rows, "efir": efir_row}
+
+
+def _efir_batched(quick: bool) -> dict[str, Any]:
+    """EFIR (n = 3, N = 10) at B = 1024 per system-step, alternating with filterpy's EKF."""
+    from fir_gym.estimators import ExtendedFIRFilter
+
+    model = fir_bench.sim2_model()
+    rng = np.random.default_rng(2)
+    x0 = np.array([0.0, 0.0, 0.5]) + 0.01 * rng.standard_normal((1024, 3))
+    efir = ExtendedFIRFilter(model, horizon=10, x0=x0)
+    ys = 0.48 + 0.3 * rng.standard_normal((64, 1024, 1))
+    u = np.zeros((1024, 0))
+    for k in range(12):
+        efir.step(ys[k], None if k == 0 else u)
+    runs = {"efir": (counting(lambda k: efir.step(ys[12 + k % 52], u)), 3 if quick else 10)}
+    fp = kalman_bench.filterpy_stepper("ekf", model, 1.0)
+    if fp is not None:
+        runs["filterpy"] = (counting(fp), 50 if quick else 300)
+    t = interleaved(runs, 3 if quick else 8)
+    b = 1e6 * t["efir"] / 1024
+    ref = 1e6 * t["filterpy"] if "filterpy" in t else None
+    return {"batched_us": b, "filterpy_ekf_us": ref,
+            "throughput_vs_filterpy_ekf": _ratio(ref, b)}
+
+
+def print_kalman(res: dict[str, Any]) -> None:
+    print("\n1. Kalman family on issue 3's models, against filterpy (α = 1 for both UKFs)\n")
+    rows = [[r["model"], r["filter"], r["single_us"], r["filterpy_us"], r["ratio"],
+             r["batched_us"], r["throughput_vs_filterpy"]] for r in res["rows"]]
+    print(format_table(["model", "filter", "µs/step", "filterpy µs/step", "ours/filterpy",
+                        "B=1024 µs/sys-step", "throughput ×filterpy"], rows, floatfmt=".3g"))
+    print("   kf: converged (steady-state) regime; kf-full: covariance recomputed "
+          "(one measurement in 1000 missing)")
+    e = res["efir"]
+    print(f"\n   EFIR (n = 3, N = 10) {e['efir_us']:.3g} µs/step = {e['efir_over_ekf']:.2f} × "
+          f"the EKF's {e['ekf_us']:.3g} µs; batched B = 1024: {e['batched_us']:.3g} µs/sys-step"
+          + ("" if e["throughput_vs_filterpy_ekf"] is None else
+             f" = {e['throughput_vs_filterpy_ekf']:.3g} × the throughput of looping "
+             f"filterpy's EKF ({e['filterpy_ekf_us']:.3g} µs) on the same model"))
+
+
+# ---------------------------------------------------------------------------- 2. estimators
+def print_estimators(rows: list[dict[str, Any]]) -> None:
+    print("\n2.", end="")
+    est_bench.print_table(rows)
+
+
+# ---------------------------------------------------------------------------- 3. envs
+def envs_section(quick: bool) -> dict[str, Any]:
+    """Steps per second of every plant and of Gymnasium's references (alternating blocks)."""
+    steps, reps = (200, 3) if quick else (1000, 6)
+    vsteps = 5 if quick else 20
+    out: dict[str, Any] = {"plants": [], "references": [], "pendulum": []}
+
+    def measure(env_id: str, native: bool, **kw: Any) -> dict[str, Any]:
+        runs = {"unwrapped": (stepper(env_id, **kw), steps),
+                "make": (stepper(env_id, unwrap=False, **kw), steps)}
+        if native:
+            runs["sync64"] = (vector_stepper(gym.make_vec(env_id, num_envs=64,
+                                                           vectorization_mode="sync")), vsteps)
+            for n in (64, 1024):
+                runs[f"native{n}"] = (vector_stepper(gym.make_vec(
+                    env_id, num_envs=n, vectorization_mode="vector_entry_point")),
+                    max(2, vsteps * 64 // n) if n > 64 else vsteps)
+        t = interleaved(runs, reps)
+        row: dict[str, Any] = {"env": env_id}
+        for key, sec in t.items():                       # per (sub-)env step
+            vec = key.startswith(("sync", "native"))
+            n = int(key.removeprefix("sync").removeprefix("native")) if vec else 1
+            row[f"{key}_us"] = 1e6 * sec / n
+        return row
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for env_id in ENV_IDS:
+            out["plants"].append(measure(env_id, env_id in VECTOR_ENV_IDS))
+        try:
+            out["references"].append(measure("CartPole-v1", True))
+        except Exception as err:
+            out["references"].append({"env": "CartPole-v1", "error": str(err)})
+        runs = {f: (stepper("fir_gym/PendulumSlider-v0", friction=f), steps)
+                for f in ("none", "coulomb", "paper")}
+        try:
+            runs["ip"] = (stepper("InvertedPendulum-v5"), steps)
+        except Exception as err:  # gymnasium[mujoco] needs imageio
+            out["references"].append({"env": "InvertedPendulum-v5", "error": str(err)})
+        times = interleaved(runs, 2 * reps)              # alternating: a fair ratio
+        ip = 1e6 * times["ip"] if "ip" in times else None
+        if ip is not None:
+            out["references"].append({"env": "InvertedPendulum-v5", "unwrapped_us": ip})
+        for friction in ("none", "coulomb", "paper"):
+            ours = 1e6 * times[friction]
+            out["pendulum"].append({"friction": friction, "us": ours,
+                                    "inverted_pendulum_us": ip,
+                                    "steps_per_s_ratio": _ratio(ip, ours)})
+    return out
+
+
+def print_envs(res: dict[str, Any]) -> None:
+    print("\n3. environments: µs per (sub-)env step and ratios of steps per second\n")
+    rows = []
+    for r in res["plants"] + [r for r in res["references"] if "error" not in r]:
+        rows.append([r["env"].removeprefix("fir_gym/"), r.get("unwrapped_us"), r.get("make_us"),
+                     r.get("sync64_us"), r.get("native64_us"), r.get("native1024_us"),
+                     _ratio(r.get("unwrapped_us"), r.get("make_us")),
+                     _ratio(r.get("sync64_us"), r.get("native64_us")),
+                     _ratio(r.get("sync64_us"), r.get("native1024_us"))])
+    print(format_table(["env", "unwrapped", "gym.make", "sync×64", "native×64", "native×1024",
+                        "make/unwrapped speed", "native/sync ×64", "native/sync ×1024"], rows,
+                       floatfmt=".3g"))
+    for r in res["references"]:
+        if "error" in r:
+            print(f"   {r['env']}: unavailable ({r['error']})")
+    print("\n   PendulumSlider-v0 against InvertedPendulum-v5 (steps/s ratio, target ≥ 1)\n")
+    print(format_table(["friction", "µs/step", "InvertedPendulum-v5 µs/step", "steps/s ratio"],
+                       [[p["friction"], p["us"], p["inverted_pendulum_us"],
+                         p["steps_per_s_ratio"]] for p in res["pendulum"]], floatfmt=".3g"))
+
+
+# ---------------------------------------------------------------------------- 4. wrappers
+def wrappers_section(quick: bool) -> dict[str, Any]:
+    """Wrapped against bare step time, in alternating blocks."""
+    from ..wrappers import EstimatorObservation, VectorEstimatorObservation
+
+    steps, reps = (200, 3) if quick else (1000, 6)
+    vsteps = 10 if quick else 40
+    single, vector = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for env_id in ENV_IDS:
+            wrapped_env = EstimatorObservation(gym.make(env_id).unwrapped, "ekf")
+            t = interleaved({"bare": (stepper(env_id), steps),
+                             "wrapped": (env_stepper(wrapped_env), steps)}, reps)
+            single.append({"env": env_id, "bare_us": 1e6 * t["bare"],
+                           "wrapped_us": 1e6 * t["wrapped"], "ratio": t["wrapped"] / t["bare"]})
+        for env_id in VECTOR_ENV_IDS:
+            for mode in ("sync", "vector_entry_point"):
+                bare = gym.make_vec(env_id, num_envs=64, vectorization_mode=mode)
+                wrapped = VectorEstimatorObservation(
+                    gym.make_vec(env_id, num_envs=64, vectorization_mode=mode), "ekf")
+                t = interleaved({"bare": (vector_stepper(bare), vsteps),
+                                 "wrapped": (vector_stepper(wrapped), vsteps)}, reps)
+                b, w = 1e6 * t["bare"] / 64, 1e6 * t["wrapped"] / 64
+                vector.append({"env": env_id, "mode": "native" if mode != "sync" else "sync",
+                               "bare_us": b, "wrapped_us": w, "ratio": w / b, "ekf_us": w - b})
+                bare.close()
+                wrapped.close()
+    return {"single": single, "vector": vector}
+
+
+def print_wrappers(res: dict[str, Any]) -> None:
+    print("\n4. estimator in the loop: wrapped / bare step time\n")
+    print(format_table(["env", "bare µs/step", "EstimatorObservation(ekf) µs/step", "ratio"],
+                       [[r["env"].removeprefix("fir_gym/"), r["bare_us"], r["wrapped_us"],
+                         r["ratio"]] for r in res["single"]], floatfmt=".3g"))
+    print("\n   VectorEstimatorObservation, batched EKF over 64 sub-envs: µs per sub-env step "
+          "(target ratio ≤ 1.2)\n")
+    print(format_table(["env", "vector env", "bare", "wrapped", "EKF share", "ratio"],
+                       [[r["env"].removeprefix("fir_gym/"), r["mode"], r["bare_us"],
+                         r["wrapped_us"], r["ekf_us"], r["ratio"]] for r in res["vector"]],
+                       floatfmt=".3g"))
+
+
+# ---------------------------------------------------------------------------- 5. targets
+def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every target of issues 3, 5, 7 and 9 with its measured ratio."""
+    out: list[dict[str, Any]] = []
+
+    def add(what: str, value: float | None, limit: float, upper: bool) -> None:
+        ok = None if value is None else (value <= limit if upper else value >= limit)
+        out.append({"target": what, "value": value, "limit": f"{'≤' if upper else '≥'} {limit:g}",
+                    "met": ok})
+
+    k = results.get("kalman")
+    if k:
+        for r in k["rows"]:
+            tag = f"{r['filter']} {r['model']}"
+            if r["filter"] in ("kf", "kf-full", "ekf"):
+                add(f"{tag}: single / filterpy", r["ratio"], 1.0, True)
+                add(f"{tag}: B=1024 µs per system-step", r["batched_us"], 0.5, True)
+            else:
+                add(f"{tag}: single / filterpy", r["ratio"], 0.5, True)
+                add(f"{tag}: B=1024 µs per system-step", r["batched_us"], 2.0, True)
+            add(f"{tag}: B=1024 throughput / looped filterpy", r["throughput_vs_filterpy"],
+                25.0, False)
+        add("efir n=3 N=10: B=1024 µs per system-step", k["efir"]["batched_us"], 5.0, True)
+        add("efir n=3 N=10: B=1024 throughput / looped filterpy EKF",
+            k["efir"]["throughput_vs_filterpy_ekf"], 25.0, False)
+    e = results.get("envs")
+    if e:
+        for r in e["plants"]:
+            if r["env"].endswith("VanDerPol-v0"):
+                add("VanDerPol-v0 native×1024 / sync steps per second",
+                    _ratio(r["sync64_us"], r["native1024_us"]), 100.0, False)
+        for p in e["pendulum"]:
+            add(f"PendulumSlider-v0 ({p['friction']}) / InvertedPendulum-v5 steps per second",
+                p["steps_per_s_ratio"], 1.0, False)
+    w = results.get("wrappers")
+    if w:
+        for r in w["vector"]:
+            add(f"VectorEstimatorObservation(ekf) {r['env'].removeprefix('fir_gym/')} "
+                f"{r['mode']}×64: wrapped / bare", r["ratio"], 1.2, True)
+    return out
+
+
+def print_targets(rows: list[dict[str, Any]]) -> None:
+    print("\n5. targets\n")
+    print(format_table(["target", "measured", "limit", "met"],
+                       [[r["target"], r["value"], r["limit"],
+                         "—" if r["met"] is None else ("yes" if r["met"] else "NO")]
+                        for r in rows], floatfmt=".3g"))
+
+
+# ---------------------------------------------------------------------------- main
+RUNNERS = {"kalman": (kalman_section, print_kalman),
+           "estimators": (est_bench.run, print_estimators),
+           "envs": (envs_section, print_envs),
+           "wrappers": (wrappers_section, print_wrappers)}
+
+
+def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = True
+        ) -> dict[str, Any]:
+    """Run the chosen sections; returns every figure (what ``--json`` writes)."""
+    results: dict[str, Any] = {"machine": {
+        "python": platform.python_version(), "numpy": np.__version__,
+        "platform": platform.platform(), "cpus": os.cpu_count(),
+        "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}}
+    start = time.perf_counter()
+    for name in sections:
+        measure, show = RUNNERS[name]
+        results[name] = measure(quick)
+        if echo:
+            show(results[name])
+            sys.stdout.flush()
+    results["targets"] = targets(results)
+    results["seconds"] = time.perf_counter() - start
+    if echo:
+        print_targets(results["targets"])
+        print(f"\n({results['seconds']:.0f} s; load average at start "
+              f"{results['machine']['load_average']})")
+    return results
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="fir-gym speed", description=__doc__.split("\n")[0])
+    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON "
+                                                       "('-' for standard output)")
+    parser.add_argument("--quick", action="store_true", help="short timings (about 10x faster)")
+    parser.add_argument("sections", nargs="*", choices=[*SECTIONS, "all"], default="all",
+                        metavar="SECTION",
+                        help=f"sections to run: {', '.join(SECTIONS)} or all (default)")
+    args = parser.parse_args(argv)
+    chosen = [args.sections] if isinstance(args.sections, str) else args.sections
+    sections = [name for name in SECTIONS if name in chosen or "all" in chosen]
+    results = run(sections, args.quick, echo=args.json != "-")
+    if args.json:
+        text = json.dumps(results, indent=1, default=_jsonable)
+        if args.json == "-":
+            print(text)
+        else:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                fh.write(text + "\n")
+            print(f"wrote {args.json}")
+    return 0
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,144 @@
+"""Fast paths of the plants equal their general formulation."""
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import fir_gym  # noqa: F401
+from fir_gym.envs import _mujoco_passive
+
+
+def test_paper_friction_callback_equals_mujoco_rne_and_solveM():
+    """The callback's closed-form 2-DOF mass matrix and bias forces give the force that
+    MuJoCo's own ``mj_rne`` + ``mj_solveM`` give, at random states, inputs and applied
+    forces (as at an RK4 stage: after mj_fwdPosition and the passive forces)."""
+    env = gym.make("fir_gym/PendulumSlider-v0", friction="paper").unwrapped
+    env.reset(seed=0)
+    m, d, law = env.mj_model, env.mj_data, env._friction_law
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        d.qpos[:] = rng.uniform([-0.3, -np.pi], [0.3, np.pi])
+        d.qvel[:] = rng.normal(scale=[1.0, 6.0])
+        d.ctrl[0] = rng.uniform(-10, 10)
+        d.qfrc_applied[:] = rng.normal(size=2)
+        mujoco.mj_forward(m, d)                           # passive forces, mass matrix
+        ref = law.reference_force(m, d)
+        before = d.qfrc_passive.copy()
+        law(m, d)
+        force = d.qfrc_passive[law.x_dof] - before[law.x_dof]
+        assert abs(force - ref) <= 1e-12 * max(1.0, abs(ref))
+        assert d.qfrc_passive[law.th_dof] == before[law.th_dof]
+
+
+def test_step_helper_equals_the_context_manager():
+    """``_mujoco_passive.step`` is ``with passive_force(law): mj_step`` (bit for bit)."""
+    runs = []
+    for helper in (True, False):
+        env = gym.make("fir_gym/PendulumSlider-v0", friction="paper").unwrapped
+        env.reset(seed=0, options={"state": [0.02, 0.1, 0.7, -1.0]})
+        m, d, law = env.mj_model, env.mj_data, env._friction_law
+        for k in range(300):
+            d.ctrl[0] = 3.0 * np.sin(0.01 * k)
+            if helper:
+                _mujoco_passive.step(m, d, 2, law)
+            else:
+                with _mujoco_passive.passive_force(law):
+                    for _ in range(2):
+                        mujoco.mj_step(m, d)
+        runs.append(np.concatenate([d.qpos, d.qvel]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert mujoco.get_mjcb_passive() is None
+
+
+@pytest.mark.parametrize("value", [0.3, -0.7, 1.0, -1.0, 1.5, -3.0, 0.0, -0.0, 1e30])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_float_action_path_equals_the_general_check(value, dtype):
+    env = gym.make("fir_gym/VanDerPol-v0").unwrapped
+    fast = env._check_action(np.array([value], dtype=dtype))
+    general = _general_check(env, value, dtype)
+    assert fast[0].dtype == np.float64 and fast[0].shape == (1,)
+    np.testing.assert_array_equal(fast[0], general[0])
+    assert fast[1] == general[1]
+
+
+def _general_check(env, value, dtype):
+    """The general branch of ``_check_action`` (a list input takes it)."""
+    a = np.asarray(np.array([value], dtype=dtype), dtype=np.float64)
+    return env._check_action(a.tolist())
+
+
+def test_float_action_path_rejects_nan():
+    env = gym.make("fir_gym/VanDerPol-v0").unwrapped
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match="action must be finite"):
+            env._check_action(np.array([bad], dtype=np.float32))
+
+
+@pytest.mark.parametrize("jacobian", [False, True])
+@pytest.mark.parametrize("noisy", [False, True])
+def test_van_der_pol_small_batches_row_by_row_equal_the_batched_loop(monkeypatch, jacobian,
+                                                                      noisy):
+    """Batches of up to SMALL_BATCH rows run the float loop row by row: bit for bit the
+    numpy loop over the whole batch."""
+    from fir_gym.envs import van_der_pol
+    dyn = van_der_pol.VanDerPolDynamics(1.0, 0.1, 100, 5.0)
+    rng = np.random.default_rng(1)
+    B = 5
+    x, u = 2.0 * rng.normal(size=(B, 2)), rng.uniform(-1, 1, size=(B, 1))
+    dW = 0.05 * rng.normal(size=(100, B)) if noisy else None
+    rows = dyn.integrate(x, u, dW, jacobian)
+    monkeypatch.setattr(van_der_pol, "SMALL_BATCH", 0)
+    batched = dyn.integrate(x, u, dW, jacobian)
+    for a, b in zip(rows, batched, strict=True):
+        if a is not None:
+            assert a.shape == b.shape and a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("jacobian", [False, True])
+def test_orbit_small_batches_row_by_row_equal_the_batched_loop(monkeypatch, jacobian):
+    from fir_gym.envs import orbit
+    dyn = gym.make("fir_gym/Orbit-v0").unwrapped.model
+    rng = np.random.default_rng(2)
+    x = np.array([8.0, 2.0]) + 0.1 * rng.normal(size=(5, 2))
+    u = rng.uniform(-1, 1, size=(5, 1))
+    fn = dyn.F if jacobian else dyn.f
+    rows = fn(x, u)
+    monkeypatch.setattr(orbit, "SMALL_BATCH", 0)
+    np.testing.assert_array_equal(rows, fn(x, u))
+
+
+def test_pendulum_model_fused_linearize_equals_f_and_F():
+    """The model's fused ``linearize`` (one RK4 pass with Jacobians) is ``f`` and ``F``."""
+    model = gym.make("fir_gym/PendulumSlider-v0").unwrapped.model
+    rng = np.random.default_rng(3)
+    for x, u in ((rng.normal(size=4), rng.normal(size=1)),
+                 (rng.normal(size=(6, 4)), rng.normal(size=(6, 1)))):
+        fx, Fx = model.linearize(x, u)
+        np.testing.assert_array_equal(fx, model.f(x, u))
+        np.testing.assert_array_equal(Fx, model.F(x, u))
+    clone = model.with_params(mu=0.3)
+    x, u = rng.normal(size=4), rng.normal(size=1)
+    np.testing.assert_array_equal(clone.linearize(x, u)[0], clone.f(x, u))
+
+
+def test_pendulum_reward_in_floats_equals_the_numpy_scalar_formula():
+    env = gym.make("fir_gym/PendulumSlider-v0").unwrapped
+    rng = np.random.default_rng(4)
+    for _ in range(500):
+        x, a = rng.normal(scale=[0.1, 1.0, 2.0, 5.0]), rng.uniform(-1, 1, size=1)
+        ref = -float(x[2] ** 2 + 0.1 * x[3] ** 2 + 100.0 * (x[0] - env.x_rest) ** 2
+                     + 0.01 * float(a[0]) ** 2) * env.params["frame_skip"] * 0.1
+        assert env._reward(x, a, x) == ref
+
+
+def test_diagonal_measurement_noise_path_equals_the_matrix_product():
+    from fir_gym.envs._base import _diagonal_of
+    rng = np.random.default_rng(5)
+    sqrt = np.diag([0.003, 0.03, 0.03, 0.3])
+    diag = _diagonal_of(sqrt)
+    for shape in ((4,), (64, 4)):
+        noise = rng.standard_normal(shape)
+        np.testing.assert_array_equal(noise * diag, noise @ sqrt.T)
+    assert _diagonal_of(np.array([[1.0, 0.1], [0.1, 1.0]])) is None

@@ -1,0 +1,62 @@
+"""fir-gym speed: the timing helpers, the target table and the JSON output (no long timing)."""
+
+import json
+
+import pytest
+
+from fir_gym.benchmarks import speed
+
+
+def test_interleaved_times_every_function():
+    calls = {"a": 0, "b": 0}
+
+    def a():
+        calls["a"] += 1
+
+    def b():
+        calls["b"] += 1
+
+    t = speed.interleaved({"a": (a, 5), "b": (b, 3)}, repeats=2)
+    assert set(t) == {"a", "b"} and all(v >= 0 for v in t.values())
+    assert calls == {"a": 1 + 2 * 5, "b": 1 + 2 * 3}       # warm-up + blocks
+
+
+def test_targets_report_ratios_and_verdicts():
+    results = {
+        "kalman": {"rows": [{"model": "linear 2x1", "filter": "kf", "ratio": 0.2,
+                             "batched_us": 0.3, "throughput_vs_filterpy": 60.0},
+                            {"model": "nonlinear 4x2", "filter": "ukf", "ratio": 0.6,
+                             "batched_us": 2.5, "throughput_vs_filterpy": None}],
+                   "efir": {"batched_us": 3.0, "throughput_vs_filterpy_ekf": 30.0}},
+        "envs": {"plants": [{"env": "fir_gym/VanDerPol-v0", "sync64_us": 50.0,
+                             "native1024_us": 2.0}],
+                 "pendulum": [{"friction": "paper", "steps_per_s_ratio": 1.1}]},
+        "wrappers": {"vector": [{"env": "fir_gym/Orbit-v0", "mode": "sync", "ratio": 1.1}]},
+    }
+    rows = {r["target"]: r for r in speed.targets(results)}
+    assert rows["kf linear 2x1: single / filterpy"]["met"] is True
+    assert rows["ukf nonlinear 4x2: single / filterpy"]["met"] is False
+    assert rows["ukf nonlinear 4x2: B=1024 throughput / looped filterpy"]["met"] is None
+    assert rows["VanDerPol-v0 native×1024 / sync steps per second"]["value"] == 25.0
+    assert rows["VanDerPol-v0 native×1024 / sync steps per second"]["met"] is False
+    speed.print_targets(list(rows.values()))                 # prints without error
+
+
+def test_main_rejects_unknown_sections_and_writes_json(tmp_path, monkeypatch, capsys):
+    with pytest.raises(SystemExit):
+        speed.main(["nonsense"])
+    monkeypatch.setitem(speed.RUNNERS, "kalman",
+                        (lambda quick: {"rows": [], "efir": {"batched_us": 1.0,
+                                                             "throughput_vs_filterpy_ekf": 40.0}},
+                         lambda res: print("kalman table")))
+    out = tmp_path / "speed.json"
+    assert speed.main(["kalman", "--quick", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["kalman"]["efir"]["batched_us"] == 1.0 and "machine" in data
+    assert "kalman table" in capsys.readouterr().out
+    ran = []
+    for name in speed.SECTIONS:
+        monkeypatch.setitem(speed.RUNNERS, name, (lambda quick, name=name: ran.append(name) or {},
+                                                  lambda res: None))
+    monkeypatch.setattr(speed, "targets", lambda results: [])
+    assert speed.main(["--quick"]) == 0 and ran == list(speed.SECTIONS)    # default: all
