@@ -254,7 +254,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from threadpoolctl import threadpool_limits
 
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # `speed` and `bench NAME` hand everything after them, verbatim, to the benchmark's
+    # own parser (argparse would otherwise claim options such as --json or --steps).
+    if argv[:1] == ["speed"]:
+        args = argparse.Namespace(func=_cmd_speed, args=argv[1:])
+    elif argv[:1] == ["bench"] and len(argv) > 1 and argv[1] in BENCHMARKS:
+        args = argparse.Namespace(func=_cmd_bench, name=argv[1], args=argv[2:])
+    else:
+        args = build_parser().parse_args(argv)
     try:
         # Every matrix here is small: a multi-threaded BLAS only adds thread hand-offs,
         # and on a busy machine its spinning threads can make a 2x2 solve cost ms.

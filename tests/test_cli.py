@@ -44,3 +44,14 @@ def test_version(capsys):
     with pytest.raises(SystemExit):
         main(["--version"])
     assert fir_gym.__version__ in capsys.readouterr().out
+
+
+def test_speed_and_bench_forward_options_to_the_benchmark(monkeypatch):
+    import fir_gym.benchmarks.speed as speed
+
+    seen = []
+    monkeypatch.setattr(speed, "main", lambda argv: seen.append(argv) or 0)
+    assert main(["speed", "--json", "out.json", "estimators"]) == 0
+    assert seen == [["--json", "out.json", "estimators"]]
+    with pytest.raises(SystemExit):
+        main(["list", "--json", "x"])
