@@ -268,3 +268,23 @@ def psd_sqrt(M: FloatArray) -> FloatArray:
     """A square root ``L`` with ``L Lᵀ = M`` for a symmetric PSD (possibly singular) ``M``."""
     w, V = np.linalg.eigh(M)
     return V * np.sqrt(np.clip(w, 0.0, None))
+
+
+class FirstStateMeasured:
+    """Dynamics whose measurement is the first state component: ``h(x) = x1``.
+
+    Orbit-v0, UncertainOscillator-v0 and VanDerPol-v0 measure ``x1``; their dynamics
+    classes inherit ``h`` and its Jacobian ``H = [1, 0, ...]`` (batched) from here.
+    """
+
+    n_x: ClassVar[int] = 2
+
+    @staticmethod
+    def h(x: FloatArray) -> FloatArray:
+        return x[..., :1].copy()
+
+    @classmethod
+    def H(cls, x: FloatArray) -> FloatArray:
+        row = np.zeros((1, cls.n_x))
+        row[0, 0] = 1.0
+        return np.broadcast_to(row, x.shape[:-1] + (1, cls.n_x)).copy()

@@ -12,7 +12,7 @@ from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
-from ._base import PlantEnv, psd_sqrt
+from ._base import FirstStateMeasured, PlantEnv, psd_sqrt
 
 TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
@@ -22,7 +22,7 @@ NOMINAL_MU = 19.91
 SMALL_BATCH = 32
 
 
-class OrbitDynamics:
+class OrbitDynamics(FirstStateMeasured):
     """Euler-discretised radial motion under gravity and radial thrust, one measurement interval.
 
     Paper 000, eq (27): ``x[j+1] = x[j] + [x2; -μ/x1² + a] Δ`` with ``Δ = euler_dt``,
@@ -84,14 +84,6 @@ class OrbitDynamics:
         """``f`` and ``F`` in one pass of the Euler loop."""
         x_next, J = self.propagate(x, u, jacobian=True)
         return x_next, J
-
-    @staticmethod
-    def h(x: FloatArray) -> FloatArray:
-        return x[..., :1].copy()
-
-    @staticmethod
-    def H(x: FloatArray) -> FloatArray:
-        return np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)).copy()
 
 
 class OrbitEnv(PlantEnv):

@@ -12,13 +12,13 @@ from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
-from ._base import PlantEnv
+from ._base import FirstStateMeasured, PlantEnv
 
 UNCERTAINTY_READINGS = ("state", "rate")
 PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
 
 
-class OscillatorDynamics:
+class OscillatorDynamics(FirstStateMeasured):
     """Paper 000, eq (29): ``x[k+1] = D_k x[k] + r(x[k], u) Δ + [0; Δ; 0] w[k]``.
 
     ``r(x, u) = [x2; -c x1 - d x2 x3 + b + u_phys; 0]`` with ``c = 25``, ``d = 10``,
@@ -34,6 +34,8 @@ class OscillatorDynamics:
     With δ = 0 both are the same Euler step. Jacobian: ``D + Δ ∂r/∂x`` ("state") or
     ``I + Δ D ∂r/∂x`` ("rate"), with ``∂r/∂x = [[0, 1, 0], [-c, -d x3, -d x2], [0, 0, 0]]``.
     """
+
+    n_x = 3
 
     def __init__(self, dt: float, stiffness: float, damping_gain: float, drive: float,
                  u_max: float, uncertainty: str) -> None:
@@ -68,14 +70,6 @@ class OscillatorDynamics:
 
     def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
         return self.jacobian(x, u)
-
-    @staticmethod
-    def h(x: FloatArray) -> FloatArray:
-        return x[..., :1].copy()
-
-    @staticmethod
-    def H(x: FloatArray) -> FloatArray:
-        return np.broadcast_to(np.array([[1.0, 0.0, 0.0]]), x.shape[:-1] + (1, 3)).copy()
 
 
 class UncertainOscillatorEnv(PlantEnv):

@@ -14,14 +14,14 @@ from fir_gym.estimators._validation import FloatArray, positive
 from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
-from ._base import PlantEnv
+from ._base import FirstStateMeasured, PlantEnv
 
 NOISE_INPUT = np.array([1.0, 1.0])
 #: batches up to this size are integrated row by row in Python floats (faster than numpy)
 SMALL_BATCH = 32
 
 
-class VanDerPolDynamics:
+class VanDerPolDynamics(FirstStateMeasured):
     """``ẋ1 = x2``, ``ẋ2 = -x1 + ε (1 - x1²) x2 + u_max·u`` integrated by Heun's method.
 
     Paper 002, §4 (ε = 1). One env step of length ``h`` is ``substeps`` Heun steps of
@@ -147,14 +147,6 @@ class VanDerPolDynamics:
         """``f`` and ``F`` in one pass of the Heun loop."""
         x_end, _, Phi = self.integrate(x, u, jacobian=True)
         return x_end, Phi
-
-    @staticmethod
-    def h(x: FloatArray) -> FloatArray:
-        return x[..., :1].copy()
-
-    @staticmethod
-    def H(x: FloatArray) -> FloatArray:
-        return np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)).copy()
 
 
 class VanDerPolEnv(PlantEnv):

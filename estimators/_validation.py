@@ -102,6 +102,21 @@ def as_batch(name: str, value: ArrayLike, size: int) -> FloatArray:
     return arr
 
 
+def input_batch(u: ArrayLike | None, x: FloatArray, n_u: int) -> FloatArray:
+    """The input for states ``x`` (``(n_x,)`` or ``(B, n_x)``): zeros when ``u`` is None.
+
+    ``u`` may be ``(n_u,)``, ``(B, n_u)``, or a scalar when ``n_u == 1``.
+    """
+    if u is None:
+        return np.zeros(x.shape[:-1] + (n_u,))
+    u_ = np.asarray(u, dtype=np.float64)
+    if u_.ndim == 0 and n_u == 1:
+        u_ = u_.reshape(1)
+    if u_.ndim not in (1, 2) or u_.shape[-1] != n_u:
+        raise ValueError(f"u must have shape ({n_u},) or (B, {n_u}); got shape {u_.shape}")
+    return u_
+
+
 def positive(name: str, value: Any, *, integer: bool = False) -> Any:
     """Check that ``value`` is a finite positive number (an int if ``integer``)."""
     if integer:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_covariance, as_matrix, positive
+from ._validation import FloatArray, as_batch, as_covariance, as_matrix, input_batch, positive
 from .model import StateSpaceModel, _central_jacobian
 
 __all__ = ["ContinuousModel"]
@@ -198,22 +198,10 @@ class ContinuousModel:
 
     # ------------------------------------------------------------------ helpers
     def _check_x(self, x: ArrayLike) -> FloatArray:
-        x = np.asarray(x, dtype=np.float64)
-        if x.ndim not in (1, 2) or x.shape[-1] != self.n_x:
-            raise ValueError(
-                f"x must have shape ({self.n_x},) or (B, {self.n_x}); got shape {x.shape}")
-        return x
+        return as_batch("x", x, self.n_x)
 
     def _input(self, u: ArrayLike | None, x: FloatArray) -> FloatArray:
-        if u is None:
-            return np.zeros(x.shape[:-1] + (self.n_u,))
-        u = np.asarray(u, dtype=np.float64)
-        if u.ndim == 0 and self.n_u == 1:
-            u = u.reshape(1)
-        if u.ndim not in (1, 2) or u.shape[-1] != self.n_u:
-            raise ValueError(
-                f"u must have shape ({self.n_u},) or (B, {self.n_u}); got shape {u.shape}")
-        return u
+        return input_batch(u, x, self.n_u)
 
 
 class _LinearParts:

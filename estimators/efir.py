@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike
 
 from ._fir_bank import WindowBank
 from ._validation import FloatArray, as_covariance, positive
-from .base import Estimator
+from ._windowed import WindowedEstimator
 from .extended import model_callables, model_linearizer
 from .model import StateSpaceModel
 from .registry import register_estimator
@@ -56,7 +56,7 @@ from .registry import register_estimator
 NOMINALS = ("open-loop", "reanchor")
 
 
-class ExtendedFIRFilter(Estimator):
+class ExtendedFIRFilter(WindowedEstimator):
     """Extended FIR filter (paper 000) on any :class:`~.model.StateSpaceModel` with ``F, H``.
 
     Args:
@@ -127,29 +127,8 @@ class ExtendedFIRFilter(Estimator):
             self._nom = np.repeat(self._x[:, None, :], L, axis=1)
 
     def _restart_systems(self, mask: np.ndarray) -> None:
-        self._pending = mask.copy() if self._pending is None else self._pending | mask
-        self._age[mask] = 0
+        super()._restart_systems(mask)
         self._in_startup = True
-
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        # the step already treated restarted systems as starting afresh
-        return self._last_xP[0][idx], self._last_xP[1][idx], None
-
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
-        x = super().step(y, u)
-        self.last_info.update(self._info)
-        return x
-
-    def _update(self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        return self._advance(y, None, valid)
-
-    def _predict_update(self, x: FloatArray, P: FloatArray | None, y: FloatArray,
-                        u: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        return self._advance(y, u, valid)
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from ._fir_bank import WindowBank, information_is_regular
 from ._validation import FloatArray, as_covariance, positive
-from .base import Estimator
+from ._windowed import WindowedEstimator
 from .fir_gains import (
     GainResult,
     Window,
@@ -55,7 +55,7 @@ def observability_index(A: ArrayLike, C: ArrayLike, R: ArrayLike | None = None) 
     return None
 
 
-class FIRFilter(Estimator):
+class FIRFilter(WindowedEstimator):
     """Minimum-variance unbiased FIR filter (papers 000 and 004) for linear models.
 
     Args:
@@ -193,31 +193,6 @@ class FIRFilter(Estimator):
             self._bank = WindowBank(n_batch, self.horizon, self._n)
         else:
             self._growing = WindowBank(n_batch, 1, self._n)
-
-    def _restart_systems(self, mask: np.ndarray) -> None:
-        self._pending = mask.copy() if self._pending is None else self._pending | mask
-        self._age[mask] = 0
-
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        # the step already treated restarted systems as starting afresh
-        return self._last_xP[0][idx], self._last_xP[1][idx], None
-
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
-        x = super().step(y, u)
-        self.last_info.update(self._info)
-        return x
-
-    # ------------------------------------------------------------------ steps
-    def _update(self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        return self._advance(y, None, valid)
-
-    def _predict_update(self, x: FloatArray, P: FloatArray | None, y: FloatArray,
-                        u: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        return self._advance(y, u, valid)
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:
