@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_batch, as_covariance, as_matrix, input_batch, positive
-from .model import StateSpaceModel, _central_jacobian
+from ._validation import FloatArray, as_matrix, positive
+from .model import StateSpaceModel, _central_jacobian, _ModelCore
 
 __all__ = ["ContinuousModel"]
 
@@ -40,7 +40,7 @@ Drift = Callable[[FloatArray, FloatArray], FloatArray]
 Output = Callable[[FloatArray], FloatArray]
 
 
-class ContinuousModel:
+class ContinuousModel(_ModelCore):
     """Continuous-time model ``dx = a(x, u) dt + G dw``, ``dz = h(x) dt + dv``.
 
     Args:
@@ -80,24 +80,10 @@ class ContinuousModel:
         n_u: int = 0,
         name: str | None = None,
     ) -> None:
-        for arg, fn in (("a", a), ("h", h)):
-            if not callable(fn):
-                raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
-        for arg, fn in (("J", J), ("H", H), ("A_of_x", A_of_x)):
-            if fn is not None and not callable(fn):
-                raise TypeError(f"{arg} must be callable or None; got {type(fn).__name__}")
-        self.Q = _readonly(as_covariance("Q", Q))
-        n_w = self.Q.shape[0]
-        self.G = _readonly(np.eye(n_w) if G is None else as_matrix("G", G, (None, n_w)))
-        self.R = _readonly(as_covariance("R", R, definite=True))
-        if isinstance(n_u, bool) or not isinstance(n_u, (int, np.integer)) or n_u < 0:
-            raise ValueError(f"n_u must be a non-negative integer; got {n_u!r}")
-        self.n_x, self.n_w, self.n_y, self.n_u = self.G.shape[0], n_w, self.R.shape[0], int(n_u)
-        self.dt = positive("dt", dt)
-        self.name = name or type(self).__name__
+        self._set_core(required={"a": a, "h": h}, optional={"J": J, "H": H, "A_of_x": A_of_x},
+                       Q=Q, R=R, G=G, n_u=n_u, dt=dt, name=name, definite_R=True)
         self._a, self._h, self._J, self._H, self._A_of_x = a, h, J, H, A_of_x
-        self.GQGT = _readonly(self.G @ self.Q @ self.G.T)
-        #: ``G Q Gᵀ`` (state noise intensity), ``R⁻¹`` (from a Cholesky solve)
+        #: ``R⁻¹`` (from a Cholesky solve); ``GQGT`` is the state noise intensity
         chol = np.linalg.cholesky(self.R)
         self.R_inv = _readonly(np.linalg.solve(chol.T, np.linalg.solve(chol, np.eye(self.n_y))))
         # linear models (see ContinuousModel.linear) set these
@@ -191,17 +177,6 @@ class ContinuousModel:
         return StateSpaceModel(f=flow, h=self._h, H=self._H, Q=self.Q * self.dt,
                                R=self.R / self.dt, G=self.G, dt=self.dt, n_u=self.n_u,
                                name=f"{self.name} (sampled)")
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(name={self.name!r}, n_x={self.n_x}, n_y={self.n_y}, "
-                f"n_u={self.n_u}, n_w={self.n_w}, dt={self.dt:g})")
-
-    # ------------------------------------------------------------------ helpers
-    def _check_x(self, x: ArrayLike) -> FloatArray:
-        return as_batch("x", x, self.n_x)
-
-    def _input(self, u: ArrayLike | None, x: FloatArray) -> FloatArray:
-        return input_batch(u, x, self.n_u)
 
 
 class _LinearParts:

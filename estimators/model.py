@@ -33,7 +33,51 @@ Output = Callable[[FloatArray], FloatArray]
 FD_RELATIVE_STEP = float(np.finfo(np.float64).eps ** (1.0 / 3.0))
 
 
-class StateSpaceModel:
+class _ModelCore:
+    """What every model shares: its callables, the noise matrices, the sizes, the checks.
+
+    ``n_x`` comes from ``G`` (its rows) or from ``Q`` when ``G`` is absent, ``n_w``
+    from ``Q``, ``n_y`` from ``R``; ``GQGT`` is ``G Q Gᵀ``.
+    """
+
+    def _set_core(self, *, required: dict[str, Any], optional: dict[str, Any], Q: ArrayLike,
+                  R: ArrayLike, G: ArrayLike | None, n_u: int, dt: float, name: str | None,
+                  definite_R: bool = False) -> None:
+        for arg, fn in required.items():
+            if not callable(fn):
+                raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
+        for arg, fn in optional.items():
+            if fn is not None and not callable(fn):
+                raise TypeError(f"{arg} must be callable or None; got {type(fn).__name__}")
+        self.Q = _readonly(as_covariance("Q", Q))
+        n_w = self.Q.shape[0]
+        self.G = _readonly(np.eye(n_w) if G is None else as_matrix("G", G, (None, n_w)))
+        self.R = _readonly(as_covariance("R", R, definite=definite_R))
+        if isinstance(n_u, bool) or not isinstance(n_u, (int, np.integer)) or n_u < 0:
+            raise ValueError(f"n_u must be a non-negative integer; got {n_u!r}")
+        self.n_x, self.n_w = int(self.G.shape[0]), int(n_w)
+        self.n_y, self.n_u = int(self.R.shape[0]), int(n_u)
+        self.dt = positive("dt", dt)
+        self.name = name or type(self).__name__
+        self._GQGT = _readonly(self.G @ self.Q @ self.G.T)
+
+    @property
+    def GQGT(self) -> FloatArray:
+        """State noise covariance (or intensity) ``G Q Gᵀ`` (``n_x x n_x``, read-only)."""
+        return self._GQGT
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(name={self.name!r}, n_x={self.n_x}, n_y={self.n_y}, "
+                f"n_u={self.n_u}, n_w={self.n_w}, dt={self.dt:g})")
+
+    def _check_x(self, x: ArrayLike) -> FloatArray:
+        return as_batch("x", x, self.n_x)
+
+    def _input(self, u: ArrayLike | None, x: FloatArray) -> FloatArray:
+        return input_batch(u, x, self.n_u)
+
+
+class StateSpaceModel(_ModelCore):
     """Discrete-time nonlinear state-space model ``x⁺ = f(x, u) + G w``, ``y = h(x) + v``.
 
     Args:
@@ -79,33 +123,13 @@ class StateSpaceModel:
         name: str | None = None,
         fF: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]] | None = None,
     ) -> None:
-        for arg, fn in (("f", f), ("h", h)):
-            if not callable(fn):
-                raise TypeError(f"{arg} must be callable; got {type(fn).__name__}")
-        for arg, fn in (("F", F), ("H", H), ("fF", fF)):
-            if fn is not None and not callable(fn):
-                raise TypeError(f"{arg} must be callable or None; got {type(fn).__name__}")
-        self.Q = _readonly(as_covariance("Q", Q))
-        n_w = self.Q.shape[0]
-        if G is None:
-            self.G = _readonly(np.eye(n_w))
-        else:
-            self.G = _readonly(as_matrix("G", G, (None, n_w)))
-        self.R = _readonly(as_covariance("R", R))
-        self.n_x = int(self.G.shape[0])
-        self.n_w = int(n_w)
-        self.n_y = int(self.R.shape[0])
-        if isinstance(n_u, bool) or not isinstance(n_u, (int, np.integer)) or n_u < 0:
-            raise ValueError(f"n_u must be a non-negative integer; got {n_u!r}")
-        self.n_u = int(n_u)
-        self.dt = positive("dt", dt)
-        self.name = name or type(self).__name__
+        self._set_core(required={"f": f, "h": h}, optional={"F": F, "H": H, "fF": fF},
+                       Q=Q, R=R, G=G, n_u=n_u, dt=dt, name=name)
         self._f = f
         self._h = h
         self._F = F
         self._H = H
         self._fF = fF
-        self._GQGT = _readonly(self.G @ self.Q @ self.G.T)
 
     # ------------------------------------------------------------------ callables
     def f(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
@@ -150,10 +174,6 @@ class StateSpaceModel:
         return self.f(x, u), self.F(x, u)
 
     # ------------------------------------------------------------------ properties
-    @property
-    def GQGT(self) -> FloatArray:
-        """State noise covariance ``G Q Gᵀ`` (``n_x x n_x``, read-only)."""
-        return self._GQGT
 
     @property
     def has_analytic_jacobians(self) -> tuple[bool, bool]:
@@ -176,17 +196,6 @@ class StateSpaceModel:
         return {"f": self._f, "h": self._h, "Q": self.Q, "R": self.R, "dt": self.dt,
                 "F": self._F, "H": self._H, "G": self.G, "n_u": self.n_u, "name": self.name,
                 "fF": self._fF}
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(name={self.name!r}, n_x={self.n_x}, n_y={self.n_y}, "
-                f"n_u={self.n_u}, n_w={self.n_w}, dt={self.dt:g})")
-
-    # ------------------------------------------------------------------ helpers
-    def _check_x(self, x: ArrayLike) -> FloatArray:
-        return as_batch("x", x, self.n_x)
-
-    def _input(self, u: ArrayLike | None, x: FloatArray) -> FloatArray:
-        return input_batch(u, x, self.n_u)
 
 
 class SystemMatrices(NamedTuple):
