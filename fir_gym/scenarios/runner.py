@@ -109,7 +109,7 @@ class Runner:
             return iterable
         try:
             from tqdm.auto import tqdm
-        except ImportError:  # progress bars are a nicety: the rl extra installs tqdm
+        except ImportError:  # tqdm is a dependency; a stripped install just shows no bars
             return iterable
         return tqdm(iterable, desc=desc, total=total, leave=False)
 
