@@ -1,0 +1,305 @@
+"""The single-system fast path of ExtendedFIRFilter (estimators/_efir_lean.py) equals the
+general batched path bit for bit: one system given as ``(n_y,)`` against the same system
+as a batch of one ``(1, n_y)`` (the general code), step by step — estimates, covariances,
+flags and the whole internal state (nominal, window bank) — through start-up, full
+windows, skipped measurements, restarts, rank-deficient windows and divergence, in both
+forms and with both nominals, on models with and without inputs, process noise, analytic
+Jacobians and with more than one output."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import fir_gym  # noqa: F401  (registers the environments)
+from fir_gym.benchmarks.fir import sim2_model
+from fir_gym.estimators import LinearModel, StateSpaceModel
+from fir_gym.estimators.efir import ExtendedFIRFilter
+
+FORMS = ("filter", "predictor")
+NOMINALS = ("open-loop", "reanchor")
+
+
+def pendulum_model() -> StateSpaceModel:
+    """A damped pendulum driven by ``u``, ``y = sin θ``: finite-difference Jacobians."""
+    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.stack([x[..., 0] + 0.05 * x[..., 1],
+                         x[..., 1] - 0.05 * (np.sin(x[..., 0]) + 0.2 * x[..., 1]) + u[..., 0]],
+                        -1)
+
+    return StateSpaceModel(f=f, h=lambda x: np.sin(x[..., :1]), Q=[[1e-3]], R=[[0.01]],
+                           G=[[0.0], [1.0]], n_u=1)
+
+
+def duffing_model() -> StateSpaceModel:
+    """Three states, two outputs (``p > 1``), one input, analytic Jacobians."""
+    dt = 0.05
+
+    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+        return np.stack([x0 + dt * x1, x1 - dt * (x0 + x0**3 * x2 + 0.1 * x1 - u[..., 0]),
+                         x2 + dt * 0.01 * np.sin(x0)], axis=-1)
+
+    def F(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        x0, x2 = x[..., 0], x[..., 2]
+        J = np.zeros(x.shape[:-1] + (3, 3))
+        J[..., 0, 0] = J[..., 2, 2] = 1.0
+        J[..., 0, 1] = dt
+        J[..., 1, 0] = -dt * (1.0 + 3.0 * x0**2 * x2)
+        J[..., 1, 1] = 1.0 - 0.1 * dt
+        J[..., 1, 2] = -dt * x0**3
+        J[..., 2, 0] = dt * 0.01 * np.cos(x0)
+        return J
+
+    def h(x: np.ndarray) -> np.ndarray:
+        return np.stack([np.sin(x[..., 0]), x[..., 1] * x[..., 2]], axis=-1)
+
+    def H(x: np.ndarray) -> np.ndarray:
+        J = np.zeros(x.shape[:-1] + (2, 3))
+        J[..., 0, 0] = np.cos(x[..., 0])
+        J[..., 1, 1] = x[..., 2]
+        J[..., 1, 2] = x[..., 1]
+        return J
+
+    return StateSpaceModel(f=f, h=h, F=F, H=H, Q=np.diag([1e-4, 1e-3, 1e-6]),
+                           R=np.diag([1e-2, 2e-2]), n_u=1, dt=dt)
+
+
+def scalar_model() -> StateSpaceModel:
+    """One state (``n = 1``: every product is a single multiplication), analytic Jacobians."""
+    return StateSpaceModel(f=lambda x, u: x + 0.1 * np.sin(x) + 0.05 * u,
+                           F=lambda x, u: (1.0 + 0.1 * np.cos(x))[..., None],
+                           h=lambda x: x + 0.2 * x**2, H=lambda x: (1.0 + 0.4 * x)[..., None],
+                           Q=[[1e-3]], R=[[0.05]], n_u=1)
+
+
+def linear_model() -> LinearModel:
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(3, 3))
+    A *= 1.02 / np.max(np.abs(np.linalg.eigvals(A)))
+    return LinearModel(A=A, C=rng.normal(size=(1, 3)), B=rng.normal(size=(3, 1)),
+                       Q=0.1 * np.eye(3), R=[[0.4]])
+
+
+def orbit_model() -> StateSpaceModel:
+    """Orbit-v0's model: ``Q = 0`` (no process noise in the windows), a fused ``fF``."""
+    env = gym.make("fir_gym/Orbit-v0")
+    model = env.unwrapped.model
+    env.close()
+    return model
+
+
+def same(a: Any, b: Any) -> bool:
+    """Bit for bit (NaN equal to NaN, ``-0.0`` not equal to ``0.0``)."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and np.array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
+def count_fast_steps(flt: ExtendedFIRFilter, counter: dict[str, int]) -> None:
+    """Wrap ``flt``'s fast step (once made) to count the steps it took."""
+    original = flt._ensure_batch
+
+    def ensure(n_batch: int, single: bool) -> None:
+        original(n_batch, single)
+        lean = flt._lean
+        if lean is None:
+            return
+
+        def counted(y: Any, u: Any) -> Any:
+            out = lean(y, u)
+            counter["fast" if out is not None else "general"] += 1
+            return out
+        flt._lean = counted
+    flt._ensure_batch = ensure                      # type: ignore[method-assign]
+
+
+def run_pair(make: Callable[[], ExtendedFIRFilter], ys: np.ndarray, us: np.ndarray | None,
+             between: Callable[[int, ExtendedFIRFilter], None] | None = None
+             ) -> tuple[dict[str, int], ExtendedFIRFilter]:
+    """Step a single-system filter and its batch-of-one twin on the same data; assert they
+    agree bit for bit after every step; return how many steps took the fast path."""
+    single, batch = make(), make()
+    counter = {"fast": 0, "general": 0}
+    count_fast_steps(single, counter)
+    for k, y in enumerate(ys):
+        u = None if us is None or k == 0 else us[k]
+        xs = single.step(y, u)
+        xb = batch.step(y[None], None if u is None else u[None])
+        assert same(xs, xb[0]), k
+        assert same(single.P, batch.P[0]), k
+        assert same(single.x_nominal, batch.x_nominal[0]), k
+        assert single.diverged == bool(batch.diverged[0]), k
+        info_s, info_b = single.last_info, batch.last_info
+        assert info_s.keys() == info_b.keys(), k
+        assert info_s["nis"] is None and info_b["nis"] is None
+        for key in ("startup", "rank_deficient", "diverged"):
+            assert info_s[key] == bool(np.asarray(info_b[key])[0]), (k, key)
+        assert same(single._bank.Z, batch._bank.Z), k
+        assert same(single._nom, batch._nom), k
+        assert same(single._age, batch._age), k
+        if between is not None:
+            between(k, single)
+            between(k, batch)
+    return counter, single
+
+
+def noisy(rng: np.random.Generator, steps: int, n_y: int, level: float = 0.3,
+          center: float = 0.0) -> np.ndarray:
+    return center + level * rng.standard_normal((steps, n_y))
+
+
+@pytest.mark.parametrize("nominal", NOMINALS)
+@pytest.mark.parametrize("form", FORMS)
+def test_benchmark_model_through_startup_full_windows_and_divergence(form: str, nominal: str
+                                                                     ) -> None:
+    """The speed benchmark's model (paper 000 sim 2) on its kind of data: healthy windows
+    first, then windows that barely see x₂ (the nominal settles where ``∂f/∂x₂ ≈ 0``),
+    with inverses near 1e33 and a covariance past ``max_covariance_trace``."""
+    ys = noisy(np.random.default_rng(1), 1500, 1, center=0.48)
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(sim2_model(), horizon=10, form=form, nominal=nominal,
+                                 x0=[0.0, 0.0, 0.5])
+    counter, flt = run_pair(make, ys, None)
+    assert counter["fast"] >= 1500 - 12 and flt.diverged
+
+
+CASES = {  # model, its nominal's start x0, the measurements' centre and spread
+    "pendulum (finite differences)": (pendulum_model, [0.3, 0.0], 0.0, 0.5),
+    "duffing (two outputs)": (duffing_model, [0.5, 0.0, 1.0], 0.0, 0.3),
+    "linear": (linear_model, None, 0.0, 0.5),
+    "scalar (n = 1)": (scalar_model, [0.4], 0.4, 0.2),
+    "orbit (Q = 0, fused fF)": (orbit_model, [7.997, 1.992], 8.0, 0.03),
+}
+
+
+@pytest.mark.parametrize("nominal", NOMINALS)
+@pytest.mark.parametrize("form", FORMS)
+@pytest.mark.parametrize("case", list(CASES))
+def test_models_with_time_varying_inputs(case: str, form: str, nominal: str) -> None:
+    model, x0, center, spread = CASES[case]
+    m = model()
+    rng = np.random.default_rng(7)
+    ys = noisy(rng, 160, m.n_y, spread, center)
+    us = 0.2 * rng.standard_normal((160, m.n_u))
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(m, horizon=6, form=form, nominal=nominal, x0=x0)
+    counter, _ = run_pair(make, ys, us)
+    assert counter["fast"] >= 160 - 8
+
+
+@pytest.mark.parametrize("nominal", NOMINALS)
+@pytest.mark.parametrize("form", FORMS)
+def test_skipped_measurements_and_restarts(form: str, nominal: str) -> None:
+    """NaN measurements (``nan_policy='skip'``) and restarts go to the general path; the fast
+    path takes over again once the windows are full."""
+    rng = np.random.default_rng(3)
+    ys = noisy(rng, 200, 1, 0.5)
+    ys[[9, 40, 41, 77, 150]] = np.nan
+    us = 0.1 * rng.standard_normal((200, 1))
+
+    def between(k: int, flt: ExtendedFIRFilter) -> None:
+        if k == 60:
+            flt.restart([0])
+        elif k == 120:
+            flt.restart(np.array([True]))
+        elif k == 170:
+            flt.reset(x0=[0.1, -0.2])
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(pendulum_model(), horizon=8, form=form, nominal=nominal,
+                                 nan_policy="skip", x0=[0.3, 0.0])
+    counter, _ = run_pair(make, ys, us, between)
+    assert counter["general"] >= 5 and counter["fast"] >= 150
+
+
+def test_rank_deficient_windows_take_the_general_readout() -> None:
+    """``y = x1·x2`` seen from a nominal with ``x2 = 0`` carries no information on ``x1``:
+    the fast step reads such windows out through the general fallback."""
+    model = StateSpaceModel(f=lambda x, u: x.copy(), h=lambda x: x[..., :1] * x[..., 1:],
+                            Q=1e-4 * np.eye(2), R=[[0.01]])
+    ys = noisy(np.random.default_rng(4), 30, 1, 0.1)
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(model, horizon=4, x0=[1.0, 0.0])
+    counter, flt = run_pair(make, ys, None)
+    assert counter["fast"] >= 30 - 4
+    assert flt.last_info["rank_deficient"] and not flt.last_info["startup"]
+
+
+def test_covariance_over_the_limit_flags_divergence() -> None:
+    """The benchmark model's covariance grows past a limit well after start-up: the fast
+    step flags it (and keeps the estimate, which is finite)."""
+    ys = noisy(np.random.default_rng(1), 300, 1, center=0.48)
+    flagged: list[int] = []
+
+    def watch(k: int, flt: ExtendedFIRFilter) -> None:
+        if flt.diverged is True and not flagged:
+            flagged.append(k)
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(sim2_model(), horizon=10, x0=[0.0, 0.0, 0.5],
+                                 max_covariance_trace=1e8)
+    counter, flt = run_pair(make, ys, None, watch)
+    assert counter["fast"] >= 300 - 12 and flt.diverged and flagged[0] > 20
+    assert np.isfinite(flt.x).all() and np.trace(flt.P) > 1e8
+
+
+def test_non_finite_estimates_keep_the_last_finite_one() -> None:
+    """An exploding model: the estimate overflows; the last finite one is kept."""
+    model = LinearModel(A=[[40.0, 1.0], [0.0, 30.0]], C=[[1.0, 0.0]], Q=0.01 * np.eye(2),
+                        R=[[0.1]])
+    ys = noisy(np.random.default_rng(6), 400, 1, 1.0)
+
+    def make() -> ExtendedFIRFilter:
+        return ExtendedFIRFilter(model, horizon=4, x0=[1.0, 1.0])
+    counter, flt = run_pair(make, ys, None)
+    assert counter["fast"] >= 100 and flt.diverged and np.isfinite(flt.x).all()
+
+
+def test_inputs_of_other_shapes_and_bad_inputs() -> None:
+    """Lists, scalars and ``(1, n_u)`` inputs step like arrays; NaN, inf and wrong shapes are
+    judged by the general path (skipped, or raised as documented)."""
+    a = ExtendedFIRFilter(pendulum_model(), horizon=4, x0=[0.2, 0.0])
+    b = ExtendedFIRFilter(pendulum_model(), horizon=4, x0=[0.2, 0.0])
+    rng = np.random.default_rng(8)
+    for k in range(12):
+        y, u = 0.3 * rng.standard_normal(1), 0.1 * rng.standard_normal(1)
+        forms = [u, float(u[0]), u[None], list(u)]
+        xa = a.step(list(y) if k % 2 else y, None if k == 0 else forms[k % 4])
+        xb = b.step(y[None], None if k == 0 else u[None])
+        assert same(xa, xb[0]) and same(a.P, b.P[0])
+    assert a._lean is not None
+    with pytest.raises(ValueError, match="y must be finite"):
+        a.step(np.array([np.nan]), [0.0])
+    with pytest.raises(ValueError, match="y must have shape"):
+        a.step(np.zeros(2), [0.0])
+    with pytest.raises(ValueError, match="u must"):
+        a.step(np.zeros(1), [np.inf])
+    with pytest.raises(ValueError, match="u must"):
+        a.step(np.zeros(1), [0.0, 1.0])
+
+
+def test_returned_estimate_is_a_copy() -> None:
+    flt = ExtendedFIRFilter(linear_model(), horizon=3)
+    for _ in range(6):
+        x = flt.step(np.ones(1), np.zeros(1))
+    assert flt._lean is not None
+    x[:] = 1e9
+    assert np.all(np.abs(flt.x) < 1e8)
+
+
+def test_a_subclass_that_overrides_a_step_hook_gets_no_fast_path() -> None:
+    class Custom(ExtendedFIRFilter):
+        def _readout(self, *args: Any) -> Any:
+            return super()._readout(*args)
+
+    flt = Custom(linear_model(), horizon=3)
+    flt.step(np.zeros(1))
+    assert flt._lean is None
+    assert ExtendedFIRFilter(linear_model(), horizon=3, x0=np.zeros((1, 3)))._lean is None
