@@ -54,6 +54,7 @@ from .extended import model_callables, model_linearizer
 from .model import StateSpaceModel
 from .registry import register_estimator
 
+STARTUPS = ("diffuse", "prior")
 NOMINALS = ("open-loop", "reanchor")
 
 
@@ -67,11 +68,21 @@ class ExtendedFIRFilter(WindowedEstimator):
             window ``y[k-N..k-1]``).
         nominal: ``"open-loop"`` (paper) or ``"reanchor"`` (see the module docstring).
         x0: the nominal's initial state (paper 000: "the filter's initial state").
-        P0: only for the start-up covariance.
+        P0: the start-up covariance (and, with ``startup="prior"``, the prior's).
+        startup: what the filter returns while its window is not yet full:
+            ``"diffuse"`` (default) or ``"prior"`` (below).
 
-    Start-up (``last_info["startup"]``): the growing-window estimate once the
-    measurements so far determine the perturbation, the nominal trajectory
-    before that (covariance ``P0`` propagated along it). A full window whose
+    Start-up (``last_info["startup"]``), ``startup="diffuse"``: the growing-window
+    estimate once the measurements so far determine the perturbation — unbiased
+    whatever ``x0`` is, but from two or three samples a velocity is a difference of
+    noisy positions (Orbit-v0: σ up to ≈ 4) —, the nominal trajectory before that
+    (covariance ``P0`` propagated along it). ``startup="prior"``: the window that
+    began at ``x0`` takes ``(x0, P0)`` as the prior of its start state, i.e. the
+    two-stage normal equations get ``P0⁻¹`` added (``V = (P0⁻¹ + F)⁻¹``) and the
+    estimate is the Kalman filter's from that prior on the linearised model — what
+    a controller wants at the start of an episode whose initial distribution is
+    known. Once the window is full the filter is the unbiased FIR filter either way
+    (the prior has left the window). A full window whose
     linearisation does not determine the state (``last_info["rank_deficient"]``)
     falls back to the previous estimate predicted through ``f`` (and ``F P Fᵀ +
     GQGᵀ``). :meth:`restart` starts chosen systems of a batch again from ``x0``
@@ -87,7 +98,8 @@ class ExtendedFIRFilter(WindowedEstimator):
 
     def __init__(self, model: StateSpaceModel, *, horizon: int, form: str = "filter",
                  nominal: str = "open-loop", x0: ArrayLike | None = None,
-                 P0: ArrayLike | None = None, **options: Any) -> None:
+                 P0: ArrayLike | None = None, startup: str = "diffuse",
+                 **options: Any) -> None:
         if not isinstance(model, StateSpaceModel) or not getattr(model, "time_invariant", True):
             raise TypeError(f"{type(self).__name__} needs a StateSpaceModel with f, h, F, H; "
                             f"got {type(model).__name__}")
@@ -96,7 +108,9 @@ class ExtendedFIRFilter(WindowedEstimator):
             raise ValueError(f"form must be 'filter' or 'predictor'; got {form!r}")
         if nominal not in NOMINALS:
             raise ValueError(f"nominal must be one of {NOMINALS}; got {nominal!r}")
-        self.form, self.nominal = form, nominal
+        if startup not in STARTUPS:
+            raise ValueError(f"startup must be one of {STARTUPS}; got {startup!r}")
+        self.form, self.nominal, self.startup = form, nominal, startup
         self._R = as_covariance("model.R", model.R, definite=True)
         Qx = np.asarray(model.GQGT)
         self._Qx = Qx if np.any(Qx) else None
@@ -202,6 +216,13 @@ class ExtendedFIRFilter(WindowedEstimator):
                  ) -> tuple[FloatArray, FloatArray, np.ndarray]:
         """Window ``w``'s estimate ``x_nom + δx̂``, with the documented fallback where singular."""
         dx, P, ok = self._bank.estimate(w)             # type: ignore[union-attr]
+        if self.startup == "prior" and start.any():   # the window that began at x0
+            n = dx.shape[1]
+            prior = np.broadcast_to(self._P0, (dx.shape[0], n, n))
+            dxp, Pp, _ = self._bank.estimate(w, prior=prior)  # type: ignore[union-attr]
+            dx = np.where(start[:, None], dxp, dx)
+            P = np.where(start[:, None, None], Pp, P)
+            ok = ok | start
         x = (self._nom if self._nom.ndim == 2 else self._nom[:, w]) + dx  # type: ignore
         if not ok.all():
             xf, Pf = self._nominal_of(w), self._P_open    # start-up: x0's nominal, P0 along it

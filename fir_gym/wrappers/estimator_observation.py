@@ -52,6 +52,7 @@ def resolve_estimator(
     if x0 is not None:
         options.setdefault("x0", x0)
         options.setdefault("P0", P0)
+        add_prior_startup(cls, options)
     return cls(model, **options)
 
 
@@ -61,6 +62,13 @@ def add_default_horizon(cls: type[Estimator], horizon: int | None,
     if (horizon is not None and "horizon" not in options
             and "horizon" in inspect.signature(cls.__init__).parameters):
         options["horizon"] = horizon
+
+
+def add_prior_startup(cls: type[Estimator], options: dict[str, Any]) -> None:
+    """In the loop the prior is the plant's initial distribution: a filter that can use a
+    prior while its window fills (``startup="prior"``) does, unless told otherwise."""
+    if "startup" not in options and "startup" in inspect.signature(cls.__init__).parameters:
+        options["startup"] = "prior"
 
 
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -89,7 +97,10 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
             row by row, ``n_x (n_x + 1) / 2`` numbers) or ``"estimate+measurement"``
             (a ``Dict`` with ``estimate`` and ``measurement``).
         **options: estimator options (``horizon=10``, ``alpha=1e-3``, ``x0``, ``P0``, ...);
-            a windowed filter without ``horizon`` gets the plant's ``default_horizon``.
+            a windowed filter without ``horizon`` gets the plant's ``default_horizon``,
+            and without ``x0``/``P0`` the plant's initial-state distribution, which a
+            filter that supports it also uses while its window fills
+            (``startup="prior"``; pass ``startup="diffuse"`` for the paper's rule).
 
     On ``reset`` the estimator is reset to its prior and consumes ``y[0]`` (an
     update only); on ``step(u)`` it consumes ``y[k]`` with the *applied* input

@@ -13,7 +13,12 @@ from numpy.typing import NDArray
 
 from fir_gym.estimators import Estimator, estimator_class
 
-from .estimator_observation import OBSERVATION_KINDS, PRIOR_FLOOR, add_default_horizon
+from .estimator_observation import (
+    OBSERVATION_KINDS,
+    PRIOR_FLOOR,
+    add_default_horizon,
+    add_prior_startup,
+)
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -66,6 +71,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             x0 = np.asarray(x0, dtype=np.float64)
             options.setdefault("x0", x0)
             options.setdefault("P0", np.asarray(P0) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2)))
+            add_prior_startup(cls, options)
         self.estimator = cls(model, **options)
         self.observation_kind = observation
         n = self.num_envs

@@ -42,6 +42,8 @@ def test_equals_one_estimator_per_env_across_autoresets(mode, name):
     prior = {"x0": wrapped.estimator._x0, "P0": wrapped.estimator._P0}
     if windowed:
         prior["horizon"] = 4
+    if name == "efir":
+        prior["startup"] = wrapped.estimator.startup
     model = gym.make(env_id).unwrapped.model
     filters = [make_estimator(name, model, **prior) for _ in range(n)]
     new_episode = np.ones(n, bool)
@@ -92,3 +94,10 @@ def test_async_vector_env_gives_the_same_numbers_as_sync():
     _, asyn = rollout("async", "fir_gym/UncertainOscillator-v0", "ekf", steps=15)
     for (a, _, _), (b, _, _) in zip(sync, asyn, strict=True):
         np.testing.assert_array_equal(a["estimate"], b["estimate"])
+
+
+def test_in_the_loop_efir_uses_the_prior_while_its_window_fills():
+    venv = gym.make_vec("fir_gym/Orbit-v0", num_envs=2, vectorization_mode="sync")
+    assert VectorEstimatorObservation(venv, "efir").estimator.startup == "prior"
+    explicit = VectorEstimatorObservation(venv, "efir", startup="diffuse")
+    assert explicit.estimator.startup == "diffuse"
