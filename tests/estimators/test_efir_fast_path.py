@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from sample_models import duffing_model
 
 import fir_gym  # noqa: F401  (registers the environments)
 from fir_gym.benchmarks.fir import sim2_model
@@ -33,40 +34,6 @@ def pendulum_model() -> StateSpaceModel:
 
     return StateSpaceModel(f=f, h=lambda x: np.sin(x[..., :1]), Q=[[1e-3]], R=[[0.01]],
                            G=[[0.0], [1.0]], n_u=1)
-
-
-def duffing_model() -> StateSpaceModel:
-    """Three states, two outputs (``p > 1``), one input, analytic Jacobians."""
-    dt = 0.05
-
-    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
-        return np.stack([x0 + dt * x1, x1 - dt * (x0 + x0**3 * x2 + 0.1 * x1 - u[..., 0]),
-                         x2 + dt * 0.01 * np.sin(x0)], axis=-1)
-
-    def F(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        x0, x2 = x[..., 0], x[..., 2]
-        J = np.zeros(x.shape[:-1] + (3, 3))
-        J[..., 0, 0] = J[..., 2, 2] = 1.0
-        J[..., 0, 1] = dt
-        J[..., 1, 0] = -dt * (1.0 + 3.0 * x0**2 * x2)
-        J[..., 1, 1] = 1.0 - 0.1 * dt
-        J[..., 1, 2] = -dt * x0**3
-        J[..., 2, 0] = dt * 0.01 * np.cos(x0)
-        return J
-
-    def h(x: np.ndarray) -> np.ndarray:
-        return np.stack([np.sin(x[..., 0]), x[..., 1] * x[..., 2]], axis=-1)
-
-    def H(x: np.ndarray) -> np.ndarray:
-        J = np.zeros(x.shape[:-1] + (2, 3))
-        J[..., 0, 0] = np.cos(x[..., 0])
-        J[..., 1, 1] = x[..., 2]
-        J[..., 1, 2] = x[..., 1]
-        return J
-
-    return StateSpaceModel(f=f, h=h, F=F, H=H, Q=np.diag([1e-4, 1e-3, 1e-6]),
-                           R=np.diag([1e-2, 2e-2]), n_u=1, dt=dt)
 
 
 def scalar_model() -> StateSpaceModel:

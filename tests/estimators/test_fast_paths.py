@@ -5,6 +5,7 @@ state, skipped measurements, divergence and restarts."""
 
 import numpy as np
 import pytest
+from sample_models import Duffing, duffing_model
 
 from fir_gym.estimators import (
     CubatureSigmaPoints,
@@ -14,48 +15,6 @@ from fir_gym.estimators import (
     StateSpaceModel,
     UnscentedKalmanFilter,
 )
-
-DT = 0.05
-
-
-class Duffing:
-    """A nonlinear 3-state model with analytic Jacobians (batched)."""
-
-    @staticmethod
-    def f(x, u):
-        x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
-        return np.stack([x0 + DT * x1, x1 - DT * (x0 + x0**3 * x2 + 0.1 * x1 - u[..., 0]),
-                         x2 + DT * 0.01 * np.sin(x0)], axis=-1)
-
-    @staticmethod
-    def F(x, u):
-        x0, x2 = x[..., 0], x[..., 2]
-        J = np.zeros(x.shape[:-1] + (3, 3))
-        J[..., 0, 0] = J[..., 2, 2] = 1.0
-        J[..., 0, 1] = DT
-        J[..., 1, 0] = -DT * (1.0 + 3.0 * x0**2 * x2)
-        J[..., 1, 1] = 1.0 - 0.1 * DT
-        J[..., 1, 2] = -DT * x0**3
-        J[..., 2, 0] = DT * 0.01 * np.cos(x0)
-        return J
-
-    @staticmethod
-    def h(x):
-        return np.stack([np.sin(x[..., 0]), x[..., 1] * x[..., 2]], axis=-1)
-
-    @staticmethod
-    def H(x):
-        J = np.zeros(x.shape[:-1] + (2, 3))
-        J[..., 0, 0] = np.cos(x[..., 0])
-        J[..., 1, 1] = x[..., 2]
-        J[..., 1, 2] = x[..., 1]
-        return J
-
-
-def duffing_model():
-    d = Duffing()
-    return StateSpaceModel(f=d.f, h=d.h, F=d.F, H=d.H, Q=np.diag([1e-4, 1e-3, 1e-6]),
-                           R=np.diag([1e-2, 2e-2]), n_u=1, dt=DT)
 
 
 def random_linear(rng, n, m, n_u):
