@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -19,68 +20,79 @@ OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
 PRIOR_FLOOR = 1e-9
 
 
+def estimator_class_of(estimator: type[Estimator] | str) -> type[Estimator]:
+    """The estimator class of a registry name or a class; anything else is a TypeError."""
+    cls = estimator_class(estimator) if isinstance(estimator, str) else estimator
+    if not (isinstance(cls, type) and issubclass(cls, Estimator)):
+        raise TypeError("estimator must be an Estimator instance, an Estimator subclass or a "
+                        f"registry name; got {estimator!r}")
+    return cls
+
+
+def build_estimator(cls: type[Estimator], plant_attr: Callable[[str], Any],
+                    options: dict[str, Any]) -> Estimator:
+    """``cls`` built for a plant from what the plant publishes, ``plant_attr(name)``.
+
+    The model is the plant's ``cls.model_attribute`` (``model``; ``continuous_model``
+    for the continuous filters). Options the caller did not give default to the
+    plant's: ``horizon`` to its ``default_horizon`` (windowed filters), ``x0``/``P0`` to
+    its initial-state distribution (:func:`prior_of`), and — the prior being known —
+    ``startup="prior"`` for filters that can use it while their window fills. One env
+    (:class:`EstimatorObservation`) and a vector env
+    (:class:`~fir_gym.wrappers.VectorEstimatorObservation`) differ only in
+    ``plant_attr``.
+    """
+    attribute = getattr(cls, "model_attribute", "model")
+    model = plant_attr(attribute)
+    if model is None:
+        raise ValueError(f"the plant has no `{attribute}`: {cls.__name__} needs the plant's "
+                         f"model (env.unwrapped.{attribute})")
+    options = dict(options)
+    accepts = inspect.signature(cls.__init__).parameters
+    horizon = plant_attr("default_horizon")
+    if horizon is not None and "horizon" in accepts:
+        options.setdefault("horizon", horizon)
+    x0, P0 = prior_of(plant_attr("initial_state"), plant_attr("initial_state_cov"))
+    if x0 is not None:
+        options.setdefault("x0", x0)
+        options.setdefault("P0", P0)
+        if "startup" in accepts:
+            options.setdefault("startup", "prior")
+    return cls(model, **options)
+
+
 def resolve_estimator(
     env: gym.Env, estimator: Estimator | type[Estimator] | str, options: dict[str, Any]
 ) -> Estimator:
     """An estimator instance for ``env`` from an instance, a class or a registry name.
 
-    Classes and names are built as ``cls(env.unwrapped.model, **options)``; when the
-    options give no prior (``x0``/``P0``), the plant's initial-state distribution is
-    used (see :func:`default_prior`). An instance is used as it is (``options`` must
-    then be empty).
+    Classes and names are built by :func:`build_estimator` from ``env.unwrapped``; an
+    instance is used as it is (``options`` must then be empty).
     """
     if isinstance(estimator, Estimator):
         if options:
             raise ValueError(f"estimator options {sorted(options)} given with an estimator "
                              "instance; configure the instance instead")
         return estimator
-    if isinstance(estimator, str):
-        cls = estimator_class(estimator)
-    elif isinstance(estimator, type) and issubclass(estimator, Estimator):
-        cls = estimator
-    else:
-        raise TypeError("estimator must be an Estimator instance, an Estimator subclass or a "
-                        f"registry name; got {estimator!r}")
-    attribute = getattr(cls, "model_attribute", "model")     # continuous filters differ
-    model = getattr(env.unwrapped, attribute, None)
-    if model is None:
-        raise ValueError(f"{type(env.unwrapped).__name__} has no `{attribute}`: {cls.__name__} "
-                         f"needs the plant's model (env.unwrapped.{attribute})")
-    options = dict(options)
-    add_default_horizon(cls, getattr(env.unwrapped, "default_horizon", None), options)
-    x0, P0 = default_prior(env)
-    if x0 is not None:
-        options.setdefault("x0", x0)
-        options.setdefault("P0", P0)
-        add_prior_startup(cls, options)
-    return cls(model, **options)
+    plant = env.unwrapped
+    return build_estimator(estimator_class_of(estimator),
+                           lambda name: getattr(plant, name, None), options)
 
 
-def add_default_horizon(cls: type[Estimator], horizon: int | None,
-                        options: dict[str, Any]) -> None:
-    """Give a windowed filter the plant's ``default_horizon`` when the options have none."""
-    if (horizon is not None and "horizon" not in options
-            and "horizon" in inspect.signature(cls.__init__).parameters):
-        options["horizon"] = horizon
-
-
-def add_prior_startup(cls: type[Estimator], options: dict[str, Any]) -> None:
-    """In the loop the prior is the plant's initial distribution: a filter that can use a
-    prior while its window fills (``startup="prior"``) does, unless told otherwise."""
-    if "startup" not in options and "startup" in inspect.signature(cls.__init__).parameters:
-        options["startup"] = "prior"
+def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """A plant's initial-state mean and covariance as a prior, floored to stay positive
+    definite (``PRIOR_FLOOR``); ``(None, None)`` when the plant publishes none."""
+    if x0 is None or P0 is None:
+        return None, None
+    x0 = np.array(x0, dtype=np.float64)
+    return x0, np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
 
 
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
     """The plant's initial-state mean and covariance (floored to stay positive definite)."""
     plant = env.unwrapped
-    x0 = getattr(plant, "initial_state", None)
-    P0 = getattr(plant, "initial_state_cov", None)
-    if x0 is None or P0 is None:
-        return None, None
-    x0 = np.asarray(x0, dtype=np.float64)
-    P0 = np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
-    return x0.copy(), P0
+    return prior_of(getattr(plant, "initial_state", None),
+                    getattr(plant, "initial_state_cov", None))
 
 
 class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):

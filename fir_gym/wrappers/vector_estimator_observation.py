@@ -11,14 +11,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from fir_gym.estimators import Estimator, estimator_class
+from fir_gym.estimators import Estimator
 
-from .estimator_observation import (
-    OBSERVATION_KINDS,
-    PRIOR_FLOOR,
-    add_default_horizon,
-    add_prior_startup,
-)
+from .estimator_observation import OBSERVATION_KINDS, build_estimator, estimator_class_of
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -56,23 +51,8 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         if isinstance(estimator, Estimator):
             raise TypeError("give VectorEstimatorObservation an estimator class or name (it "
                             "builds one batched estimator); got an instance")
-        cls = estimator_class(estimator) if isinstance(estimator, str) else estimator
-        if not (isinstance(cls, type) and issubclass(cls, Estimator)):
-            raise TypeError(f"estimator must be an Estimator subclass or a registry name; "
-                            f"got {estimator!r}")
-        model = _plant_attr(env, getattr(cls, "model_attribute", "model"))
-        if model is None:
-            raise ValueError(f"this vector env's plant has no "
-                             f"`{getattr(cls, 'model_attribute', 'model')}` for {cls.__name__}")
-        options = dict(options)
-        add_default_horizon(cls, _plant_attr(env, "default_horizon"), options)
-        x0, P0 = _plant_attr(env, "initial_state"), _plant_attr(env, "initial_state_cov")
-        if x0 is not None and P0 is not None:
-            x0 = np.asarray(x0, dtype=np.float64)
-            options.setdefault("x0", x0)
-            options.setdefault("P0", np.asarray(P0) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2)))
-            add_prior_startup(cls, options)
-        self.estimator = cls(model, **options)
+        cls = estimator_class_of(estimator)
+        self.estimator = build_estimator(cls, lambda name: _plant_attr(env, name), options)
         self.observation_kind = observation
         n = self.num_envs
         n_x = self.estimator.model.n_x
