@@ -26,6 +26,20 @@ def best_time(fn: Callable[[], Any], budget: float, repeats: int = 3, max_calls:
     return best
 
 
+def per_call(fn: Callable[[], Any], calls: int, repeats: int, warmup: int = 1) -> float:
+    """Seconds per call of ``fn``: best of ``repeats`` blocks of ``calls`` calls, after
+    ``warmup`` calls (the best block is the one least disturbed by other load)."""
+    for _ in range(warmup):
+        fn()
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / calls)
+    return best
+
+
 def interleaved(runs: dict[str, tuple[Callable[[], Any], int]], repeats: int
                 ) -> dict[str, float]:
     """Seconds per call of each ``(function, calls per block)``, timed in alternating blocks

@@ -14,53 +14,25 @@ by other load); only ratios measured in one run should be compared.
 from __future__ import annotations
 
 import argparse
-import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import gymnasium as gym
-import numpy as np
 
 from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
-
-
-def _best(fn: Callable[[], None], steps: int, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, (time.perf_counter() - start) / steps)
-    return best
+from ._timing import per_call, stepper, vector_stepper
 
 
 def time_single(env_id: str, steps: int, repeats: int, **kwargs: object) -> float:
-    """Seconds per step of one env (reset when an episode ends)."""
-    env = gym.make(env_id, **kwargs).unwrapped
-    env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
-
-    def run() -> None:
-        for _ in range(steps):
-            if env.step(action)[2]:
-                env.reset()
-
-    run()                                                 # warm-up
-    return _best(run, steps, repeats)
+    """Seconds per step of one unwrapped env (reset when an episode ends)."""
+    return per_call(stepper(env_id, **kwargs), steps, repeats, warmup=steps)
 
 
 def time_vector(env_id: str, mode: str, num_envs: int, steps: int, repeats: int) -> float:
     """Seconds per sub-env step of a vector env."""
     envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
-    envs.reset(seed=0)
-    actions = np.zeros(envs.action_space.shape, dtype=envs.action_space.dtype)
-
-    def run() -> None:
-        for _ in range(steps):
-            envs.step(actions)
-
-    run()
-    seconds = _best(run, steps, repeats) / num_envs
+    seconds = per_call(vector_stepper(envs), steps, repeats, warmup=steps) / num_envs
     envs.close()
     return seconds
 

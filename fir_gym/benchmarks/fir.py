@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -36,6 +35,8 @@ from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearMo
 from fir_gym.estimators.efir import ExtendedFIRFilter
 from fir_gym.estimators.fir import FIRFilter
 from fir_gym.estimators.fir_gains import batch_gain, make_window, two_stage_gain
+
+from ._timing import per_call
 
 DT = 0.01
 
@@ -96,16 +97,6 @@ class _MinimalEKF:
         return self.x
 
 
-def _best_time(fn: Callable[[], Any], repeat: int, number: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / number)
-    return best
-
-
 def fit_exponent(N: np.ndarray, t: np.ndarray) -> float:
     """Least-squares slope of ``log t`` against ``log N``."""
     return float(np.polyfit(np.log(N), np.log(t), 1)[0])
@@ -130,15 +121,15 @@ def growth(horizons: tuple[int, ...] = (25, 50, 100, 200, 400, 800),
     rows, bank_rows = [], []
     for N in horizons:
         win = make_window(A, C, 0.1 * np.eye(n), np.eye(p), N)
-        tc = _best_time(lambda win=win: two_stage_gain(win), 5, 2)
-        ta = _best_time(lambda win=win: batch_gain(win), 3 if N < 800 else 2, 1)
+        tc = per_call(lambda win=win: two_stage_gain(win), 2, 5, warmup=0)
+        ta = per_call(lambda win=win: batch_gain(win), 1, 3 if N < 800 else 2, warmup=0)
         rows.append((N, tc, ta))
     y = np.zeros(p)
     for N in bank_horizons:
         f = FIRFilter(tv, horizon=N)
         for _ in range(N + 2):
             f.step(y)
-        bank_rows.append((N, _best_time(lambda f=f: f.step(y), 5, 20)))
+        bank_rows.append((N, per_call(lambda f=f: f.step(y), 20, 5, warmup=0)))
     R, Rb = np.array(rows), np.array(bank_rows)
     sel, selb = R[:, 0] >= fit_from, Rb[:, 0] >= bank_fit_from
     return {"rows": rows, "bank_rows": bank_rows,
@@ -181,7 +172,7 @@ def batched(n_batch: int = 1024, horizon: int = 10, steps: int = 10, repeats: in
     for y in ys[:horizon]:
         efir.step(y)
     it = iter(ys[horizon:])
-    t = _best_time(lambda: efir.step(next(it)), repeats, steps)
+    t = per_call(lambda: efir.step(next(it)), steps, repeats, warmup=0)
     return {"us_per_system_step": t / n_batch * 1e6, "step_ms": t * 1e3}
 
 
@@ -192,7 +183,7 @@ def linear_speed(horizon: int = 10) -> dict[str, float]:
     y = np.zeros(1)
     for _ in range(horizon + 2):
         f.step(y)
-    return {"fir_step_us": _best_time(lambda: f.step(y), 5, 2000) * 1e6}
+    return {"fir_step_us": per_call(lambda: f.step(y), 2000, 5, warmup=0) * 1e6}
 
 
 def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, np.ndarray]:

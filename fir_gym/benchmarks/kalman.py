@@ -17,7 +17,6 @@ printed beside it.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -27,6 +26,8 @@ from fir_gym.estimators import LinearModel, StateSpaceModel
 from fir_gym.estimators.extended import ExtendedKalmanFilter
 from fir_gym.estimators.kalman import KalmanFilter
 from fir_gym.estimators.unscented import UnscentedKalmanFilter
+
+from ._timing import counting, per_call
 
 DT = 0.01
 
@@ -73,15 +74,8 @@ def models() -> dict[str, StateSpaceModel]:
 
 
 def _time(step: Callable[[int], Any], n: int, warmup: int) -> float:
-    for k in range(warmup):
-        step(k)
-    best = np.inf
-    for _ in range(3):
-        t0 = time.perf_counter()
-        for k in range(n):
-            step(k)
-        best = min(best, (time.perf_counter() - t0) / n)
-    return best * 1e6
+    """µs per call of ``step(k)`` (``k`` counts on across blocks): best of 3 blocks of ``n``."""
+    return per_call(counting(step), n, 3, warmup=warmup) * 1e6
 
 
 def ours_stepper(cls: type, model: StateSpaceModel, batch: int, skip: bool = False,

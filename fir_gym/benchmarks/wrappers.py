@@ -12,29 +12,19 @@ wrapped / bare per sub-env step is the wrapper's overhead (target ≤ 1.2). Best
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Sequence
 
 import gymnasium as gym
-import numpy as np
 
 from .. import VECTOR_ENV_IDS
 from ..tables import format_table
 from ..wrappers import VectorEstimatorObservation
+from ._timing import per_call, vector_stepper
 
 
 def _time(envs: gym.vector.VectorEnv, steps: int, repeats: int) -> float:
-    envs.reset(seed=0)
-    actions = np.zeros(envs.action_space.shape, dtype=np.float32)
-    for _ in range(5):
-        envs.step(actions)
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
-            envs.step(actions)
-        best = min(best, (time.perf_counter() - start) / steps)
-    return best / envs.num_envs
+    """Seconds per sub-env step."""
+    return per_call(vector_stepper(envs), steps, repeats, warmup=5) / envs.num_envs
 
 
 def run(num_envs: int = 64, steps: int = 100, repeats: int = 5, estimator: str = "ekf"
