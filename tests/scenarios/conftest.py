@@ -17,3 +17,16 @@ def quick_report():
         return cache[name]
 
     return get
+
+
+@pytest.fixture
+def tiny_sweep(monkeypatch):
+    """The sweeps scenario shrunk to one ratio, one window, one δ and short runs."""
+    from fir_gym.scenarios import sweeps
+
+    monkeypatch.setitem(sweeps.RATIOS, True, (0.9,))
+    monkeypatch.setitem(sweeps.ORBIT_WINDOWS, True, (10,))
+    monkeypatch.setitem(sweeps.ORBIT_STEPS, True, 120)
+    monkeypatch.setitem(sweeps.DELTAS, True, (0.15,))
+    monkeypatch.setitem(sweeps.OSC_STEPS, True, 420)
+    return sweeps

@@ -14,7 +14,6 @@ from fir_gym.scenarios import (
     paper001,
     paper002,
     paper003,
-    sweeps,
 )
 from fir_gym.scenarios import paper000 as p000
 from fir_gym.scenarios._montecarlo import (
@@ -113,13 +112,8 @@ def test_joblib_and_dask_give_the_serial_numbers():
             np.testing.assert_equal(other.figures, report.figures)
 
 
-def test_sweep_cells_filtered_in_workers_match_serial(monkeypatch):
+def test_sweep_cells_filtered_in_workers_match_serial(tiny_sweep):
     """The sweep's tasks run the filters themselves: joblib workers must give the same bits."""
-    monkeypatch.setitem(sweeps.RATIOS, True, (0.9,))
-    monkeypatch.setitem(sweeps.ORBIT_WINDOWS, True, (10,))
-    monkeypatch.setitem(sweeps.ORBIT_STEPS, True, 120)
-    monkeypatch.setitem(sweeps.DELTAS, True, (0.15,))
-    monkeypatch.setitem(sweeps.OSC_STEPS, True, 405)
-    serial = sweeps.run(seed=2, quick=True, runs=2)
-    parallel = sweeps.run(seed=2, quick=True, runs=2, runner=Runner("joblib", jobs=2))
+    serial = tiny_sweep.run(seed=2, quick=True, runs=2)
+    parallel = tiny_sweep.run(seed=2, quick=True, runs=2, runner=Runner("joblib", jobs=2))
     np.testing.assert_equal(parallel.figures, serial.figures)

@@ -40,14 +40,9 @@ def test_fir_recovers_within_its_window(report):
                 assert r["recovery"] is not None and r["recovery"] <= int(name[7:])
 
 
-def test_same_seed_same_figures(monkeypatch):
-    monkeypatch.setitem(sweeps.RATIOS, True, (0.9,))
-    monkeypatch.setitem(sweeps.ORBIT_WINDOWS, True, (10,))
-    monkeypatch.setitem(sweeps.ORBIT_STEPS, True, 120)
-    monkeypatch.setitem(sweeps.DELTAS, True, (0.15,))
-    monkeypatch.setitem(sweeps.OSC_STEPS, True, 420)
-    a = sweeps.run(seed=2, quick=True, runs=2)
-    b = sweeps.run(seed=2, quick=True, runs=2)
+def test_same_seed_same_figures(tiny_sweep):
+    a = tiny_sweep.run(seed=2, quick=True, runs=2)
+    b = tiny_sweep.run(seed=2, quick=True, runs=2)
     np.testing.assert_equal(a.figures, b.figures)
 
 
