@@ -10,15 +10,18 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._compiled import active
 from fir_gym.estimators._validation import FloatArray, positive
 from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv
+from ._van_der_pol_heun import heun_interval
 
 NOISE_INPUT = np.array([1.0, 1.0])
 #: batches up to this size are integrated row by row in Python floats (faster than numpy)
 SMALL_BATCH = 32
+_NO_NOISE = np.zeros((1, 1))
 
 
 class VanDerPolDynamics(FirstStateMeasured):
@@ -73,6 +76,8 @@ class VanDerPolDynamics(FirstStateMeasured):
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
+        if active(heun_interval):
+            return self._integrate_compiled(x, u, dW, jacobian)
         if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
             return self._integrate_rows(x, u, dW, jacobian)
         if single:
@@ -121,6 +126,19 @@ class VanDerPolDynamics(FirstStateMeasured):
         Phi = np.stack([np.stack(np.broadcast_arrays(p11, p12), -1),
                         np.stack(np.broadcast_arrays(p21, p22), -1)], -2)
         return x_end, x1_mean, Phi
+
+    def _integrate_compiled(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
+                            jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """:meth:`integrate` by the compiled loop (:mod:`._van_der_pol_heun`), same bits."""
+        lead = x.shape[:-1]
+        u = np.asarray(u, dtype=np.float64)
+        x_end, x1_mean, Phi = heun_interval(
+            np.asarray(x, dtype=np.float64).reshape(-1, 2), u.reshape(-1, u.shape[-1]),
+            _NO_NOISE if dW is None else np.asarray(dW, dtype=np.float64).reshape(
+                self.substeps, -1), dW is not None, self.substeps, self.epsilon, self.tau,
+            self.u_max, jacobian)
+        return (x_end.reshape(lead + (2,)), x1_mean.reshape(lead) if lead else float(x1_mean[0]),
+                Phi.reshape(lead + (2, 2)) if jacobian else None)
 
     def _integrate_rows(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
                         jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:

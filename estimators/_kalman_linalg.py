@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._compiled import active
+from ._kalman_kernels import cholesky_rows
 from ._validation import FloatArray
 
 
@@ -45,6 +47,13 @@ def constant_or_batch(M: FloatArray) -> FloatArray:
     return M[0] if M.ndim == 3 and M.strides[0] == 0 else M
 
 
+def as_batch(M: FloatArray) -> FloatArray:
+    """A C-contiguous ``(B or 1, r, c)`` view or copy of a 2-D or batched ``M`` (a stride-0
+    batch made by ``np.broadcast_to`` becomes its one row): the compiled kernels' layout."""
+    M = constant_or_batch(M)
+    return np.ascontiguousarray(M[None] if M.ndim == 2 else M)
+
+
 def cholesky(S: FloatArray) -> FloatArray:
     """Lower Cholesky factor of a batch ``S`` (B, m, m); NaN rows where ``S`` is not PD.
 
@@ -54,6 +63,8 @@ def cholesky(S: FloatArray) -> FloatArray:
     definite gets an all-NaN factor, so callers flag it instead of raising.
     """
     n_b, m, _ = S.shape
+    if active(cholesky_rows):
+        return cholesky_rows(np.ascontiguousarray(S))
     if m > 3 and n_b < 32:
         try:
             return np.linalg.cholesky(S)

@@ -20,6 +20,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _lean, _small
+from ._compiled import active
+from ._kalman_kernels import predict_update
+from ._kalman_linalg import as_batch
 from ._validation import FloatArray
 from .base import Estimator
 from .kalman import predict_covariance, update_kernel
@@ -96,6 +99,9 @@ class ExtendedKalmanFilter(Estimator):
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
         x, F = self._linearize(x, u)
+        if x.shape[0] > 1 and active(predict_update):      # one compiled loop over systems
+            return predict_update(x, as_batch(P), as_batch(F), self._GQGt, y - self._h(x),
+                                  as_batch(self._H(x)), as_batch(self.model.R), valid)
         P = predict_covariance(P, F, self._GQGt)
         e = y - self._h(x)
         x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)

@@ -43,7 +43,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _lean, _small
+from ._compiled import active
 from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
+from ._unscented_kernels import cross_moments
 from ._validation import FloatArray
 from .base import Estimator
 from .extended import model_callables
@@ -184,6 +186,16 @@ def _moments(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatArray, Fl
     return Z[:, 0] + d, D, d, c
 
 
+def _mean_covariance(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatArray]:
+    """``z̄ = Σ Wᵐ Zᵢ`` and ``Σ Wᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ`` (symmetric) of ``Z (B, N, k)``."""
+    if active(cross_moments):
+        Z = np.ascontiguousarray(Z)
+        mean, _, P = cross_moments(Z, Z, sp.Wm, sp.Wc)
+        return mean, P
+    mean, D, d, c = _moments(Z, sp)
+    return mean, symmetrize(_cross(D, d, c, D, d, c, sp))
+
+
 def _outer(a: FloatArray, b: FloatArray) -> FloatArray:
     return a[:, :, None] * b[:, None, :]
 
@@ -223,8 +235,7 @@ def unscented_transform(Z: ArrayLike, Wm: ArrayLike | SigmaPoints, Wc: ArrayLike
     if Z_.ndim != 3 or Z_.shape[1] != sp.Wm.shape[0] or sp.Wc.shape != sp.Wm.shape:
         raise ValueError(f"Z must have shape (N, k) or (B, N, k) with N = {sp.Wm.shape[0]} "
                          f"weights; got {np.shape(Z)}")
-    mean, D, d, c = _moments(Z_, sp)
-    P = symmetrize(_cross(D, d, c, D, d, c, sp))
+    mean, P = _mean_covariance(Z_, sp)
     if noise_cov is not None:
         P = P + np.asarray(noise_cov, dtype=np.float64)
     return (mean[0], P[0]) if single else (mean, P)
@@ -294,8 +305,8 @@ class UnscentedKalmanFilter(Estimator):
         X = self._draw(x, P)
         U = np.repeat(u, N, axis=0)
         Xf = self._f(X.reshape(n_b * N, n), U).reshape(n_b, N, n)
-        x_pred, D, d, c = _moments(Xf, self.points)
-        P_pred = symmetrize(_cross(D, d, c, D, d, c, self.points)) + self._GQGt
+        x_pred, P_pred = _mean_covariance(Xf, self.points)
+        P_pred = P_pred + self._GQGt
         X_pred = self._draw(x_pred, P_pred) if self.redraw else Xf
         return self._correct(x_pred, P_pred, X_pred, y, valid)
 
@@ -304,10 +315,15 @@ class UnscentedKalmanFilter(Estimator):
         n_b, N, n = X.shape
         sp = self.points
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
-        y_hat, DZ, dz, cz = _moments(Z, sp)
-        _, DX, dx, cx = _moments(X, sp)
-        S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp)) + self.model.R
-        Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        if active(cross_moments):
+            y_hat, S = _mean_covariance(Z, sp)
+            Pxz = cross_moments(np.ascontiguousarray(X), Z, sp.Wm, sp.Wc)[2]
+        else:
+            y_hat, DZ, dz, cz = _moments(Z, sp)
+            _, DX, dx, cx = _moments(X, sp)
+            S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
+            Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        S = S + self.model.R
         W = spd_inverse(S)
         K = Pxz @ W
         e = y - y_hat

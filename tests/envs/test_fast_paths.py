@@ -7,6 +7,7 @@ import pytest
 
 import fir_gym  # noqa: F401
 from fir_gym.envs import _mujoco_passive
+from fir_gym.estimators import _compiled
 
 
 def test_paper_friction_callback_equals_mujoco_rne_and_solveM():
@@ -80,8 +81,9 @@ def test_float_action_path_rejects_nan():
 def test_van_der_pol_small_batches_row_by_row_equal_the_batched_loop(monkeypatch, jacobian,
                                                                       noisy):
     """Batches of up to SMALL_BATCH rows run the float loop row by row: bit for bit the
-    numpy loop over the whole batch."""
+    numpy loop over the whole batch (both without the compiled loop)."""
     from fir_gym.envs import van_der_pol
+    monkeypatch.setattr(_compiled, "ENABLED", False)
     dyn = van_der_pol.VanDerPolDynamics(1.0, 0.1, 100, 5.0)
     rng = np.random.default_rng(1)
     B = 5
@@ -142,3 +144,42 @@ def test_diagonal_measurement_noise_path_equals_the_matrix_product():
         noise = rng.standard_normal(shape)
         np.testing.assert_array_equal(noise * diag, noise @ sqrt.T)
     assert _diagonal_of(np.array([[1.0, 0.1], [0.1, 1.0]])) is None
+
+
+@pytest.mark.parametrize("shape", [(2,), (1, 2), (5, 2), (40, 2), (300, 2)])
+@pytest.mark.parametrize("jacobian", [False, True])
+@pytest.mark.parametrize("noisy", [False, True])
+def test_van_der_pol_compiled_loop_equals_the_python_loop(monkeypatch, shape, jacobian, noisy):
+    """The compiled Heun loop does the Python loop's operations in the same order: same bits,
+    shapes and types, for one system, small batches (float rows) and large (numpy loop)."""
+    pytest.importorskip("numba")
+    from fir_gym.envs import van_der_pol
+    dyn = van_der_pol.VanDerPolDynamics(1.0, 0.1, 100, 5.0)
+    rng = np.random.default_rng(3)
+    x = 2.0 * rng.normal(size=shape)
+    u = rng.uniform(-1, 1, size=shape[:-1] + (1,))
+    dW = 0.05 * rng.normal(size=(100,) + shape[:-1]) if noisy else None
+    monkeypatch.setattr(_compiled, "ENABLED", True)
+    compiled = dyn.integrate(x, u, dW, jacobian)
+    monkeypatch.setattr(_compiled, "ENABLED", False)
+    python = dyn.integrate(x, u, dW, jacobian)
+    for a, b in zip(compiled, python, strict=True):
+        if b is None:
+            assert a is None
+            continue
+        assert type(a) is type(b) and np.shape(a) == np.shape(b)
+        np.testing.assert_array_equal(a, b)
+
+
+def test_van_der_pol_rollout_is_the_same_with_and_without_the_compiled_loop(monkeypatch):
+    pytest.importorskip("numba")
+    runs = []
+    for enabled in (True, False):
+        monkeypatch.setattr(_compiled, "ENABLED", enabled)
+        env = gym.make("fir_gym/VanDerPol-v0")
+        obs, _ = env.reset(seed=4)
+        trace = [obs]
+        for k in range(30):
+            trace.append(env.step(np.array([np.sin(0.3 * k)], dtype=np.float32))[0])
+        runs.append(np.array(trace))
+    np.testing.assert_array_equal(runs[0], runs[1])

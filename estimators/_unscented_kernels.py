@@ -1,0 +1,85 @@
+"""The unscented moments of a batch as one compiled loop (numba; ``None`` without it).
+
+:func:`cross_moments` is the
+numpy path's ``_moments`` + ``_cross`` of :mod:`.unscented` in one pass: with
+deviations from the first point ``D = Z − Z₀`` (which keeps the α = 1e-3 weights'
+±1e6 cancellation out of the sums), ``d = Σ Wᵐ D``, ``c = Σ Wᶜ D``, the means are
+``Z₀ + d`` and ``Σ Wᶜ (Aᵢ − ā)(Bᵢ − b̄)ᵀ = Σ Wᶜ Dₐ D_bᵀ − d_a c_bᵀ − c_a d_bᵀ +
+(Σ Wᶜ) d_a d_bᵀ``. The numpy path is the oracle (``tests/estimators/test_compiled.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._compiled import kernel
+from ._kalman_kernels import CHUNK
+
+
+def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n_b, N, p = A.shape
+    q = Z.shape[2]
+    sum_Wc = 0.0
+    for i in range(N):
+        sum_Wc += Wc[i]
+    mean_a = np.empty((n_b, p))
+    mean_z = np.empty((n_b, q))
+    C = np.empty((n_b, p, q))
+    c = CHUNK                                  # systems per block, held D[point, j, system]
+    Da, Dz = np.empty((N, p, c)), np.empty((N, q, c))
+    da, ca, dz, cz = np.empty((p, c)), np.empty((p, c)), np.empty((q, c)), np.empty((q, c))
+    Cs = np.empty((p, q, c))
+    for b0 in range(0, n_b, c):
+        nb = min(c, n_b - b0)
+        for t in range(nb):
+            for i in range(N):
+                for j in range(p):
+                    Da[i, j, t] = A[b0 + t, i, j] - A[b0 + t, 0, j]
+                for j in range(q):
+                    Dz[i, j, t] = Z[b0 + t, i, j] - Z[b0 + t, 0, j]
+        for j in range(p):
+            dj, cj = da[j], ca[j]
+            for t in range(nb):
+                dj[t] = 0.0
+                cj[t] = 0.0
+            for i in range(N):
+                wm, wc, Dij = Wm[i], Wc[i], Da[i, j]
+                for t in range(nb):
+                    dj[t] += wm * Dij[t]
+                    cj[t] += wc * Dij[t]
+        for j in range(q):
+            dj, cj = dz[j], cz[j]
+            for t in range(nb):
+                dj[t] = 0.0
+                cj[t] = 0.0
+            for i in range(N):
+                wm, wc, Dij = Wm[i], Wc[i], Dz[i, j]
+                for t in range(nb):
+                    dj[t] += wm * Dij[t]
+                    cj[t] += wc * Dij[t]
+        for j in range(p):
+            for k in range(q):
+                acc = Cs[j, k]
+                for t in range(nb):
+                    acc[t] = 0.0
+                for i in range(N):
+                    wc, Daj, Dzk = Wc[i], Da[i, j], Dz[i, k]
+                    for t in range(nb):
+                        acc[t] += (wc * Daj[t]) * Dzk[t]
+                daj, caj, dzk, czk = da[j], ca[j], dz[k], cz[k]
+                for t in range(nb):
+                    acc[t] = acc[t] - daj[t] * czk[t] - caj[t] * dzk[t] + sum_Wc * (daj[t] *
+                                                                                  dzk[t])
+        for t in range(nb):
+            for j in range(p):
+                mean_a[b0 + t, j] = A[b0 + t, 0, j] + da[j, t]
+                for k in range(q):
+                    C[b0 + t, j, k] = Cs[j, k, t]
+            for k in range(q):
+                mean_z[b0 + t, k] = Z[b0 + t, 0, k] + dz[k, t]
+    return mean_a, mean_z, C
+
+
+#: ``cross_moments(A (B, N, p), Z (B, N, q), Wm, Wc) -> (ā, z̄, Σ Wᶜ (Aᵢ − ā)(Zᵢ − z̄)ᵀ)``
+cross_moments = kernel(_cross_moments)

@@ -1,0 +1,197 @@
+"""The compiled kernels (numba) against the numpy paths they replace.
+
+Oracle: the numpy path of the same function (batched ``matmul``/BLAS, closed
+forms), an implementation that shares no code with the loops. The two sum in
+different orders, so they agree to round-off, not bit for bit; the bound used is
+``1e-12`` relative to the size of the numbers, far below any filter's error and
+far above double round-off (~1e-16 per operation, a few dozen operations). The
+rules for the edge cases must match exactly: NaN where ``S`` is not positive
+definite, ``x⁻, P⁻`` kept and NaN NIS where a measurement is missing.
+"""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fir_gym.estimators import _compiled
+from fir_gym.estimators._kalman_linalg import cholesky
+from fir_gym.estimators.kalman import predict_covariance, update_kernel
+from fir_gym.estimators.unscented import (
+    CubatureSigmaPoints,
+    MerweScaledSigmaPoints,
+    unscented_transform,
+)
+
+numba = pytest.importorskip("numba")
+
+from fir_gym.estimators._kalman_kernels import cholesky_rows, predict_update  # noqa: E402
+from fir_gym.estimators._unscented_kernels import cross_moments  # noqa: E402
+
+RTOL = 1e-12
+
+
+def spd(rng, shape, n, scale=1.0):
+    A = rng.normal(size=shape + (n, n))
+    return scale * (A @ A.swapaxes(-1, -2)) / n + 0.1 * np.eye(n)
+
+
+def close(a, b, scale=1.0):
+    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * scale)
+
+
+@pytest.fixture
+def numpy_path(monkeypatch):
+    """Run a block with the compiled kernels switched off."""
+    class Switch:
+        def __enter__(self):
+            monkeypatch.setattr(_compiled, "ENABLED", False)
+
+        def __exit__(self, *exc):
+            monkeypatch.setattr(_compiled, "ENABLED", True)
+    return Switch()
+
+
+@pytest.mark.parametrize(("n", "m"), [(1, 1), (2, 1), (3, 2), (4, 2), (5, 3), (6, 4)])
+@pytest.mark.parametrize("shared", [False, True])
+def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, shared):
+    rng = np.random.default_rng(n * 10 + m)
+    B = 150                                        # more than two chunks, one partial
+    x = rng.normal(size=(B, n))
+    P = spd(rng, (B,), n)
+    F = rng.normal(size=(1 if shared else B, n, n)) / np.sqrt(n) + np.eye(n)
+    H = rng.normal(size=(1 if shared else B, m, n))
+    R = spd(rng, (1 if shared else B,), m, 0.1)
+    Q = spd(rng, (), n, 0.01)
+    e = rng.normal(size=(B, m))
+    valid = rng.uniform(size=B) > 0.1
+    got = predict_update(x, P, F, Q, e, H, R, valid)
+    P_pred = predict_covariance(P, F[0] if shared else F, Q)
+    want = update_kernel(x, P_pred, e, H[0] if shared else H, R[0] if shared else R, valid)
+    for a, b in zip(got, (want[0], want[1], want[3]), strict=True):
+        close(a, b, np.nanmax(np.abs(b)))
+    assert np.isnan(got[2][~valid]).all() and np.isfinite(got[2][valid]).all()
+    np.testing.assert_array_equal(got[0][~valid], x[~valid])
+    np.testing.assert_array_equal(got[1], got[1].swapaxes(1, 2))        # symmetric exactly
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_predict_update_gives_nan_where_S_is_not_positive_definite(m):
+    rng = np.random.default_rng(m)
+    B, n = 6, 3
+    x, P = rng.normal(size=(B, n)), spd(rng, (B,), n)
+    F, H = np.eye(n)[None], rng.normal(size=(1, m, n))
+    R = np.repeat(0.1 * np.eye(m)[None], B, axis=0)
+    R[2] = -1e3 * np.eye(m)                        # S indefinite for system 2 only
+    valid = np.ones(B, dtype=bool)
+    x_new, P_new, nis = predict_update(x, P, F, np.zeros((n, n)), rng.normal(size=(B, m)), H,
+                                       R, valid)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ref = update_kernel(x, predict_covariance(P, F[0], np.zeros((n, n))),
+                            rng.normal(size=(B, m)), H[0], R, valid)
+    for got, want in ((x_new, ref[0]), (P_new, ref[1]), (nis, ref[3])):
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    assert np.isnan(x_new[2]).all() and np.isfinite(np.delete(x_new, 2, axis=0)).all()
+
+
+def test_cholesky_rows_equal_the_column_loop_and_flag_indefinite_rows(numpy_path):
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 3, 5):
+        S = spd(rng, (40,), n)
+        S[7] = -S[7]                               # not positive definite
+        got = cholesky_rows(S)
+        with numpy_path, np.errstate(invalid="ignore"):
+            want = cholesky(S)
+        ok = np.isfinite(want).all(axis=(1, 2))
+        np.testing.assert_array_equal(np.isfinite(got).all(axis=(1, 2)), ok)
+        close(got[ok], want[ok], np.abs(want[ok]).max())
+        close(got[ok] @ got[ok].swapaxes(1, 2), S[ok], np.abs(S).max())
+        assert np.isnan(got[7]).all()
+
+
+@pytest.mark.parametrize("points", [MerweScaledSigmaPoints(4, 1e-3, 2.0, 0.0),
+                                    MerweScaledSigmaPoints(3, 1.0, 2.0, 0.0),
+                                    CubatureSigmaPoints(4)], ids=repr)
+def test_cross_moments_equal_the_numpy_moments(points, numpy_path):
+    """Including α = 1e-3, whose weights (~ ±1e6) cancel: the deviations from the first
+    point keep both paths accurate, so they still agree to round-off of the result."""
+    rng = np.random.default_rng(6)
+    B, n = 70, points.n
+    X = points.sigma_points(rng.normal(size=(B, n)), spd(rng, (B,), n, 0.2))
+    Z = np.sin(X[..., :2]) + X[..., 1:3] ** 2
+    mean_x, mean_z, Pxz = cross_moments(X, Z, points.Wm, points.Wc)
+    mz, Pz = unscented_transform(Z, points)
+    with numpy_path:
+        mz_ref, Pz_ref = unscented_transform(Z, points)
+        mx_ref, _ = unscented_transform(X, points)
+    close(mean_z, mz_ref, 1.0)
+    close(mz, mz_ref, 1.0)
+    close(mean_x, mx_ref, 1.0)
+    # A priori bound for two summation orders of Σ Wᶜ Dₐ D_zᵀ − d_a c_zᵀ − c_a d_zᵀ + (Σ Wᶜ)
+    # d_a d_zᵀ (Higham 2002, §3.1: |fl(Σ tᵢ) − Σ tᵢ| <= γ_k Σ |tᵢ|): each path is within
+    # γ_{N+4} of the sum of the magnitudes of the terms, which the α = 1e-3 weights make
+    # ~1e6 times the result (that is the scheme's conditioning, not either path's error).
+    Wm, Wc = np.abs(points.Wm), np.abs(points.Wc)
+
+    def magnitude(A, C):
+        Da, Dc = np.abs(A - A[:, :1]), np.abs(C - C[:, :1])
+        da, ca = np.einsum("i,bij->bj", Wm, Da), np.einsum("i,bij->bj", Wc, Da)
+        dc, cc = np.einsum("i,bij->bj", Wm, Dc), np.einsum("i,bij->bj", Wc, Dc)
+        return (np.einsum("i,bij,bik->bjk", Wc, Da, Dc) + da[:, :, None] * cc[:, None]
+                + ca[:, :, None] * dc[:, None] + Wc.sum() * da[:, :, None] * dc[:, None])
+    gamma = 2 * (points.num_points + 4) * np.finfo(float).eps
+    assert (np.abs(Pz - Pz_ref) <= gamma * magnitude(Z, Z)).all()
+    with numpy_path:
+        _, Pxz_ref = _cross_reference(X, Z, points)
+    assert (np.abs(Pxz - Pxz_ref) <= gamma * magnitude(X, Z)).all()
+
+
+def _cross_reference(X, Z, sp):
+    from fir_gym.estimators.unscented import _cross, _moments
+    _, DX, dx, cx = _moments(X, sp)
+    mz, DZ, dz, cz = _moments(Z, sp)
+    return mz, _cross(DX, dx, cx, DZ, dz, cz, sp)
+
+
+@pytest.mark.parametrize(("name", "options"), [("ekf", {}), ("ukf", {"alpha": 1.0}),
+                                               ("ukf", {"points": CubatureSigmaPoints(4)})])
+def test_batched_filters_run_the_same_with_and_without_kernels(name, options, numpy_path):
+    """Whole EKF/UKF runs (64 systems, 60 steps, a missing measurement) agree with the numpy
+    path to round-off (1e-12). Well-conditioned sigma points only: with α = 1e-3 both paths
+    drift apart by ~1e-10 (1e6 × eps per step, bounded in the test above)."""
+    from fir_gym.benchmarks.kalman import models
+    from fir_gym.estimators import make_estimator
+    model = models()["nonlinear"]
+    rng = np.random.default_rng(7)
+    B, K = 64, 60
+    x0 = 0.3 * rng.normal(size=(B, 4))
+    Y = 0.3 * rng.normal(size=(K, B, 2))
+    Y[10, 5] = np.nan                               # a missing measurement
+    runs = []
+    for enabled in (True, False):
+        filt = make_estimator(name, model, x0=x0, P0=0.1 * np.eye(4), nan_policy="skip",
+                              **options)
+        if enabled:
+            trace = [filt.step(y) for y in Y]
+        else:
+            with numpy_path:
+                trace = [filt.step(y) for y in Y]
+        runs.append((np.array(trace), filt.P))
+    np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=0,
+                               atol=1e-12 * np.abs(runs[1][1]).max())
+
+
+def test_environment_variable_turns_the_kernels_off():
+    code = "from fir_gym.estimators import _compiled; print(_compiled.ENABLED)"
+    for value, expected in (("0", "False"), ("off", "False"), ("1", "True")):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env={"FIR_GYM_NUMBA": value, "PATH": ""}, check=True)
+        assert out.stdout.strip() == expected
+
+
+def test_without_numba_kernel_gives_none(monkeypatch):
+    monkeypatch.setattr(_compiled, "numba", None)
+    assert _compiled.kernel(lambda x: x) is None
+    assert not _compiled.active(None)
