@@ -9,10 +9,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators._compiled import active
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, psd_sqrt
+from ._interval_kernels import orbit_interval
 
 TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
@@ -44,6 +46,12 @@ class OrbitDynamics(FirstStateMeasured):
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
+        if active(orbit_interval):                 # the same loop compiled: same bits
+            u = np.asarray(u, dtype=np.float64)
+            x_next, J = orbit_interval(np.asarray(x, dtype=np.float64).reshape(-1, 2),
+                                       u.reshape(-1, u.shape[-1]), self.substeps, self.mu,
+                                       self.euler_dt, self.thrust_max, jacobian)
+            return x_next.reshape(lead + (2,)), J.reshape(lead + (2, 2)) if jacobian else None
         if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
             # a few systems (e.g. a UKF's sigma points): row by row in floats, bit for bit
             # the batched loop and ~10x faster where numpy's per-call cost dominates

@@ -16,7 +16,7 @@ from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv
-from ._van_der_pol_heun import heun_interval
+from ._interval_kernels import heun_interval
 
 NOISE_INPUT = np.array([1.0, 1.0])
 #: batches up to this size are integrated row by row in Python floats (faster than numpy)
@@ -129,7 +129,7 @@ class VanDerPolDynamics(FirstStateMeasured):
 
     def _integrate_compiled(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
                             jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        """:meth:`integrate` by the compiled loop (:mod:`._van_der_pol_heun`), same bits."""
+        """:meth:`integrate` by the compiled loop (:mod:`._interval_kernels`), same bits."""
         lead = x.shape[:-1]
         u = np.asarray(u, dtype=np.float64)
         x_end, x1_mean, Phi = heun_interval(

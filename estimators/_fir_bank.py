@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._compiled import active
+from ._fir_bank_kernels import bank_estimate, bank_predict, bank_update
 from ._validation import FloatArray
 
 #: An information matrix ``F`` counts as singular when the smallest eigenvalue of
@@ -50,6 +52,10 @@ class WindowBank:
     ``Z[b, :, w] = [[P | T | x̄], [· | −F | b]]`` (``2n x (2n+1)``), so a measurement
     update is one matmul ``r = C [P | T | x̄] − [0 | 0 | y] = [C P | C T | −e]`` and
     one rank-``p`` correction ``Z −= [K; W] ⊗ r`` with ``[K; W] = [P Cᵀ; (C T)ᵀ] Σ⁻¹``.
+
+    Batches of more than one system run compiled loops (:mod:`._fir_bank_kernels`); a
+    batch of one keeps the numpy path, which the single-system EFIR step
+    (:mod:`._efir_lean`) reproduces bit for bit.
     """
 
     def __init__(self, n_batch: int, n_windows: int, n: int) -> None:
@@ -77,6 +83,10 @@ class WindowBank:
         ``y``: ``(B, p)`` or ``(B, W, p)``; ``valid``: ``(B,)`` — invalid systems skip.
         """
         n, Z = self.n, self.Z
+        if C.shape[-2] <= 2 and Z.shape[0] > 1 and active(bank_update):  # one compiled pass
+            bank_update(Z, _windows(C), R, y[:, None] if y.ndim == 2 else y,
+                        _ALL if valid is None else valid, (0,) * n)
+            return
         r = _lmul(C, Z[:, :n])                                  # (B, p, W, 2n+1)
         r[..., 2 * n] -= y[:, :, None] if y.ndim == 2 else y.swapaxes(1, 2)
         p = r.shape[1]
@@ -106,6 +116,12 @@ class WindowBank:
         ``Qx``: ``(n, n)`` or ``(B, n, n)`` (``None``: no process noise, ``P`` stays 0).
         """
         n, Z = self.n, self.Z
+        if Z.shape[0] > 1 and active(bank_predict):             # one compiled pass over Z
+            bank_predict(Z, _windows(A), _NONE if Bu is None else
+                         (Bu[:, None] if Bu.ndim == 2 else Bu),
+                         _NONE if Qx is None else (Qx[None] if Qx.ndim == 2 else Qx),
+                         Bu is not None, Qx is not None, (0,) * n)
+            return
         Z[:, :n] = _lmul(A, Z[:, :n])
         if Qx is not None:
             P = Z[:, :n, :, :n]
@@ -130,6 +146,11 @@ class WindowBank:
         values are meaningless and the caller falls back.
         """
         n = self.n
+        if prior is None and not smoother and n <= 3 and self.Z.shape[0] >= 32 and \
+                active(bank_estimate):
+            x, P, regular = bank_estimate(self.Z, w, RANK_RTOL * n ** (n - 1), (0,) * n)
+            if regular.all():                   # else the numpy path's eigenvalue test
+                return x, P, regular
         Zs = self.Z[:, :, w, :]
         if prior is None:
             Fi, regular = spd_inverse(-Zs[:, n:, n:2 * n])
@@ -199,3 +220,12 @@ def _lmul(M: FloatArray, X: FloatArray) -> FloatArray:
     if M.ndim == 3:
         return (M @ X.reshape(B, n, W * m)).reshape(B, M.shape[1], W, m)
     return (M @ X.swapaxes(1, 2)).swapaxes(1, 2)
+
+
+_ALL = np.ones(1, dtype=bool)
+_NONE = np.zeros((1, 1, 1))
+
+
+def _windows(M: FloatArray) -> FloatArray:
+    """``M`` as ``(B|1, W|1, k, n)`` (a ``(B|1, k, n)`` matrix is shared by the windows)."""
+    return np.ascontiguousarray(M[:, None] if M.ndim == 3 else M, dtype=np.float64)

@@ -101,6 +101,7 @@ def test_van_der_pol_small_batches_row_by_row_equal_the_batched_loop(monkeypatch
 @pytest.mark.parametrize("jacobian", [False, True])
 def test_orbit_small_batches_row_by_row_equal_the_batched_loop(monkeypatch, jacobian):
     from fir_gym.envs import orbit
+    monkeypatch.setattr(_compiled, "ENABLED", False)
     dyn = gym.make("fir_gym/Orbit-v0").unwrapped.model
     rng = np.random.default_rng(2)
     x = np.array([8.0, 2.0]) + 0.1 * rng.normal(size=(5, 2))
@@ -183,3 +184,20 @@ def test_van_der_pol_rollout_is_the_same_with_and_without_the_compiled_loop(monk
             trace.append(env.step(np.array([np.sin(0.3 * k)], dtype=np.float32))[0])
         runs.append(np.array(trace))
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("shape", [(2,), (1, 2), (5, 2), (300, 2)])
+@pytest.mark.parametrize("jacobian", [False, True])
+def test_orbit_compiled_loop_equals_the_python_loop(monkeypatch, shape, jacobian):
+    pytest.importorskip("numba")
+    dyn = gym.make("fir_gym/Orbit-v0").unwrapped.model
+    rng = np.random.default_rng(4)
+    x = np.array([8.0, 2.0]) + 0.1 * rng.normal(size=shape)
+    u = rng.uniform(-1, 1, size=shape[:-1] + (1,))
+    fn = dyn.F if jacobian else dyn.f
+    monkeypatch.setattr(_compiled, "ENABLED", True)
+    compiled = fn(x, u)
+    monkeypatch.setattr(_compiled, "ENABLED", False)
+    python = fn(x, u)
+    assert compiled.shape == python.shape
+    np.testing.assert_array_equal(compiled, python)
