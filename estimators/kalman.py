@@ -26,7 +26,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _lean, _small
-from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
+from ._compiled import active
+from ._kalman_kernels import predict_update
+from ._kalman_linalg import (
+    as_batch,
+    constant_or_batch,
+    eye,
+    mul_t,
+    rmul,
+    spd_inverse,
+    symmetrize,
+)
 from ._validation import FloatArray
 from .base import Estimator
 from .model import StateSpaceModel
@@ -294,6 +304,15 @@ class KalmanFilter(Estimator):
         self._steady = None
         if P.strides[0] == 0 and valid is self._all_valid:
             P = P[:1]                                   # shared covariance
+        elif P.shape[0] > 1 and active(predict_update):  # one covariance per system: compiled
+            mats = self._matrices(self._k)
+            _, _, C, Ct, _, R = mats
+            x_new, P_new, nis = predict_update(x, as_batch(P), as_batch(At.T), Qd,
+                                               y - rmul(x, Ct), C[None], R[None], valid)
+            if self._constant and valid is self._all_valid and _converged(P_new, P):
+                K, W, _ = gain_kernel(predict_covariance(P, At.T, Qd), C, R)
+                self._steady = (P_new, K, W, Ct)
+            return x_new, P_new, nis
         P_pred = predict_covariance(P, At.T, Qd)       # A P Aᵀ + G Q Gᵀ
         mats = self._matrices(self._k)
         x_new, P_new, nis, K, W = self._correct(x, P_pred, y, valid, mats)

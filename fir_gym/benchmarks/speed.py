@@ -47,6 +47,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from fir_gym.estimators import _compiled
+
 from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
 from . import estimators as est_bench
@@ -90,23 +92,39 @@ def kalman_section(quick: bool) -> dict[str, Any]:
         big = kalman_bench.ours_stepper(cls, model, 1024, skip, **opts)
         for k in range(2000):                           # past the transient (KF steady state)
             ours(k + 1)
-        for k in range(20):
             big(k + 1)
         runs = {"ours": (counting(ours), calls), "big": (counting(big), big_calls)}
+        if _compiled.ENABLED:                           # the same filter on its numpy path
+            big_numpy = kalman_bench.ours_stepper(cls, model, 1024, skip, **opts)
+            for k in range(2000):
+                _numpy_path(big_numpy, k + 1)
+            runs["numpy"] = (counting(lambda k, step=big_numpy: _numpy_path(step, k)),
+                             big_calls)
         fp = kalman_bench.filterpy_stepper(fname.split("-")[0], model, opts.get("alpha", 1.0))
         if fp is not None:
             runs["filterpy"] = (counting(fp), max(calls // 4, 50))
         t = interleaved(runs, reps)
         single, batched = 1e6 * t["ours"], 1e6 * t["big"] / 1024
         ref = 1e6 * t["filterpy"] if "filterpy" in t else None
+        numpy_us = 1e6 * t["numpy"] / 1024 if "numpy" in t else None
         rows.append({"model": model.name, "filter": fname, "single_us": single,
                      "batched_us": batched, "filterpy_us": ref, "ratio": _ratio(single, ref),
-                     "throughput_vs_filterpy": _ratio(ref, batched)})
+                     "throughput_vs_filterpy": _ratio(ref, batched),
+                     "batched_numpy_us": numpy_us, "compiled_speedup": _ratio(numpy_us, batched)})
     efir = fir_bench.speed(steps=200 if quick else 500, repeats=5 if quick else 15)
     eb = _efir_batched(quick)
     efir_row = {"efir_us": 1e6 * efir["efir"], "ekf_us": 1e6 * efir["ekf"],
                 "efir_over_ekf": efir["ratio"], **eb}
     return {"rows": rows, "efir": efir_row}
+
+
+def _numpy_path(step: Any, k: int) -> Any:
+    """``step(k)`` with the compiled kernels switched off (the numpy reference path)."""
+    _compiled.ENABLED = False
+    try:
+        return step(k)
+    finally:
+        _compiled.ENABLED = True
 
 
 def _efir_batched(quick: bool) -> dict[str, Any]:
@@ -122,22 +140,32 @@ def _efir_batched(quick: bool) -> dict[str, Any]:
     for k in range(12):
         efir.step(ys[k], None if k == 0 else u)
     runs = {"efir": (counting(lambda k: efir.step(ys[12 + k % 52], u)), 3 if quick else 10)}
+    if _compiled.ENABLED:
+        slow = ExtendedFIRFilter(model, horizon=10, x0=x0)
+        for k in range(12):
+            _numpy_path(lambda k: slow.step(ys[k], None if k == 0 else u), k)
+        runs["numpy"] = (counting(lambda k: _numpy_path(
+            lambda k: slow.step(ys[12 + k % 52], u), k)), 3 if quick else 10)
     fp = kalman_bench.filterpy_stepper("ekf", model, 1.0)
     if fp is not None:
         runs["filterpy"] = (counting(fp), 50 if quick else 300)
     t = interleaved(runs, 3 if quick else 8)
     b = 1e6 * t["efir"] / 1024
     ref = 1e6 * t["filterpy"] if "filterpy" in t else None
+    numpy_us = 1e6 * t["numpy"] / 1024 if "numpy" in t else None
     return {"batched_us": b, "filterpy_ekf_us": ref,
-            "throughput_vs_filterpy_ekf": _ratio(ref, b)}
+            "throughput_vs_filterpy_ekf": _ratio(ref, b), "batched_numpy_us": numpy_us,
+            "compiled_speedup": _ratio(numpy_us, b)}
 
 
 def print_kalman(res: dict[str, Any]) -> None:
     print("\n1. Kalman family on issue 3's models, against filterpy (α = 1 for both UKFs)\n")
     rows = [[r["model"], r["filter"], r["single_us"], r["filterpy_us"], r["ratio"],
-             r["batched_us"], r["throughput_vs_filterpy"]] for r in res["rows"]]
+             r["batched_us"], r["throughput_vs_filterpy"], r.get("compiled_speedup")]
+            for r in res["rows"]]
     print(format_table(["model", "filter", "µs/step", "filterpy µs/step", "ours/filterpy",
-                        "B=1024 µs/sys-step", "throughput ×filterpy"], rows, floatfmt=".3g"))
+                        "B=1024 µs/sys-step", "throughput ×filterpy",
+                        "compiled ×numpy path"], rows, floatfmt=".3g"))
     print("   kf: converged (steady-state) regime; kf-full: covariance recomputed "
           "(one measurement in 1000 missing)")
     e = res["efir"]
@@ -145,7 +173,9 @@ def print_kalman(res: dict[str, Any]) -> None:
           f"the EKF's {e['ekf_us']:.3g} µs; batched B = 1024: {e['batched_us']:.3g} µs/sys-step"
           + ("" if e["throughput_vs_filterpy_ekf"] is None else
              f" = {e['throughput_vs_filterpy_ekf']:.3g} × the throughput of looping "
-             f"filterpy's EKF ({e['filterpy_ekf_us']:.3g} µs) on the same model"))
+             f"filterpy's EKF ({e['filterpy_ekf_us']:.3g} µs) on the same model")
+          + ("" if e.get("compiled_speedup") is None else
+             f"; {e['compiled_speedup']:.3g} × its numpy path"))
 
 
 # ---------------------------------------------------------------------------- 2. estimators
@@ -334,6 +364,8 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
         "python": platform.python_version(), "numpy": np.__version__,
         "platform": platform.platform(), "cpus": os.cpu_count(),
         "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "compiled_kernels": (f"numba {_compiled.numba.__version__}" if _compiled.ENABLED
+                             else "off (numpy paths)"),
         "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}}
     start = time.perf_counter()
     for name in sections:
@@ -346,7 +378,8 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
     results["seconds"] = time.perf_counter() - start
     if echo:
         print_targets(results["targets"])
-        print(f"\n({results['seconds']:.0f} s; load average at start "
+        print(f"\n({results['seconds']:.0f} s; compiled kernels: "
+              f"{results['machine']['compiled_kernels']}; load average at start "
               f"{results['machine']['load_average']})")
     return results
 
