@@ -29,8 +29,10 @@ def test_targets_report_ratios_and_verdicts():
                              "batched_us": 2.5, "throughput_vs_filterpy": None}],
                    "efir": {"batched_us": 3.0, "throughput_vs_filterpy_ekf": 30.0}},
         "envs": {"plants": [{"env": "fir_gym/VanDerPol-v0", "sync64_us": 50.0,
-                             "native1024_us": 2.0}],
-                 "pendulum": [{"friction": "paper", "steps_per_s_ratio": 1.1}]},
+                             "native1024_us": 2.0, "wiener1024_us": 1.0}],
+                 "pendulum": [{"friction": "paper", "steps_per_s_ratio": 1.1},
+                              {"friction": "coulomb", "steps_per_s_ratio": 0.8,
+                               "inverted_pendulum_us": 20.0, "mujoco_us": 16.0}]},
         "wrappers": {"vector": [{"env": "fir_gym/Orbit-v0", "mode": "sync", "ratio": 1.1}]},
     }
     rows = {r["target"]: r for r in speed.targets(results)}
@@ -39,6 +41,11 @@ def test_targets_report_ratios_and_verdicts():
     assert rows["ukf nonlinear 4x2: B=1024 throughput / looped filterpy"]["met"] is None
     assert rows["VanDerPol-v0 native×1024 / sync steps per second"]["value"] == 25.0
     assert rows["VanDerPol-v0 native×1024 / sync steps per second"]["met"] is False
+    assert rows["VanDerPol-v0 native×1024 / sync steps per second"]["ceiling"] == 50.0
+    coulomb = "PendulumSlider-v0 (coulomb) / InvertedPendulum-v5 steps per second"
+    assert rows[coulomb]["ceiling"] == 1.25 and rows[coulomb]["met"] is False
+    assert rows["PendulumSlider-v0 (paper) / InvertedPendulum-v5 steps per second"][
+        "ceiling"] is None
     speed.print_targets(list(rows.values()))                 # prints without error
 
 

@@ -357,7 +357,7 @@ def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
         for p in e["pendulum"]:
             add(f"PendulumSlider-v0 ({p['friction']}) / InvertedPendulum-v5 steps per second",
                 p["steps_per_s_ratio"], 1.0, False,
-                _ratio(p["inverted_pendulum_us"], p.get("mujoco_us")))
+                _ratio(p.get("inverted_pendulum_us"), p.get("mujoco_us")))
     w = results.get("wrappers")
     if w:
         for r in w["vector"]:
