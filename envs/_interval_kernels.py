@@ -15,21 +15,32 @@ import numpy as np
 from fir_gym.estimators._compiled import kernel
 
 
+def _start_loops(u: np.ndarray, n_b: int, scale: float, jacobian: bool
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled first input column per system (``u`` is ``(B, n_u)`` or one row for all)
+    and the identity Jacobians the substeps multiply (empty without ``jacobian``)."""
+    force = np.empty(n_b)
+    for b in range(n_b):
+        force[b] = u[b if u.shape[0] == n_b else 0, 0] * scale
+    J = np.zeros((n_b, 2, 2) if jacobian else (0, 2, 2))
+    for b in range(J.shape[0]):
+        J[b, 0, 0] = 1.0
+        J[b, 1, 1] = 1.0
+    return force, J
+
+
+_start = kernel(_start_loops)
+
+
 def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
                    substeps: int, eps: float, tau: float, u_max: float, jacobian: bool
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n_b = x.shape[0]
-    force = np.empty(n_b)
-    for b in range(n_b):                   # u is (B, n_u) or one row for all
-        force[b] = u[b if u.shape[0] == n_b else 0, 0] * u_max
+    force, Phi = _start(u, n_b, u_max, jacobian)
     half = 0.5 * tau
     x1 = x[:, 0].copy()
     x2 = x[:, 1].copy()
     x1_sum = 0.5 * x1
-    Phi = np.zeros((n_b, 2, 2) if jacobian else (0, 2, 2))
-    for b in range(Phi.shape[0]):
-        Phi[b, 0, 0] = 1.0
-        Phi[b, 1, 1] = 1.0
     for s in range(substeps):
         for b in range(n_b):
             dw = dW[s, b] if noisy else 0.0
@@ -73,13 +84,7 @@ def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu: float, d: f
     n_b = x.shape[0]
     r = x[:, 0].copy()
     v = x[:, 1].copy()
-    a = np.empty(n_b)
-    for b in range(n_b):                   # u is (B, n_u) or one row for all
-        a[b] = u[b if u.shape[0] == n_b else 0, 0] * thrust_max
-    J = np.zeros((n_b, 2, 2) if jacobian else (0, 2, 2))
-    for b in range(J.shape[0]):
-        J[b, 0, 0] = 1.0
-        J[b, 1, 1] = 1.0
+    a, J = _start(u, n_b, thrust_max, jacobian)
     for _ in range(substeps):
         for b in range(n_b):
             rb, vb = r[b], v[b]

@@ -16,6 +16,24 @@ from ._compiled import kernel
 from ._kalman_kernels import CHUNK
 
 
+def _weighted_sums_loops(D: np.ndarray, Wm: np.ndarray, Wc: np.ndarray, d: np.ndarray,
+                        c: np.ndarray, nb: int) -> None:
+    """``d = Σᵢ Wᵐᵢ Dᵢ`` and ``c = Σᵢ Wᶜᵢ Dᵢ`` of SoA deviations ``D[point, j, system]``."""
+    for j in range(D.shape[1]):
+        dj, cj = d[j], c[j]
+        for t in range(nb):
+            dj[t] = 0.0
+            cj[t] = 0.0
+        for i in range(D.shape[0]):
+            wm, wc, Dij = Wm[i], Wc[i], D[i, j]
+            for t in range(nb):
+                dj[t] += wm * Dij[t]
+                cj[t] += wc * Dij[t]
+
+
+_weighted_sums = kernel(_weighted_sums_loops)
+
+
 def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n_b, N, p = A.shape
@@ -38,26 +56,8 @@ def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
                     Da[i, j, t] = A[b0 + t, i, j] - A[b0 + t, 0, j]
                 for j in range(q):
                     Dz[i, j, t] = Z[b0 + t, i, j] - Z[b0 + t, 0, j]
-        for j in range(p):
-            dj, cj = da[j], ca[j]
-            for t in range(nb):
-                dj[t] = 0.0
-                cj[t] = 0.0
-            for i in range(N):
-                wm, wc, Dij = Wm[i], Wc[i], Da[i, j]
-                for t in range(nb):
-                    dj[t] += wm * Dij[t]
-                    cj[t] += wc * Dij[t]
-        for j in range(q):
-            dj, cj = dz[j], cz[j]
-            for t in range(nb):
-                dj[t] = 0.0
-                cj[t] = 0.0
-            for i in range(N):
-                wm, wc, Dij = Wm[i], Wc[i], Dz[i, j]
-                for t in range(nb):
-                    dj[t] += wm * Dij[t]
-                    cj[t] += wc * Dij[t]
+        _weighted_sums(Da, Wm, Wc, da, ca, nb)
+        _weighted_sums(Dz, Wm, Wc, dz, cz, nb)
         for j in range(p):
             for k in range(q):
                 acc = Cs[j, k]
