@@ -9,6 +9,7 @@ rules for the edge cases must match exactly: NaN where ``S`` is not positive
 definite, ``x⁻, P⁻`` kept and NaN NIS where a measurement is missing.
 """
 
+import os
 import subprocess
 import sys
 
@@ -187,7 +188,7 @@ def test_environment_variable_turns_the_kernels_off():
     code = "from fir_gym.estimators import _compiled; print(_compiled.ENABLED)"
     for value, expected in (("0", "False"), ("off", "False"), ("1", "True")):
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             env={"FIR_GYM_NUMBA": value, "PATH": ""}, check=True)
+                             env={**os.environ, "FIR_GYM_NUMBA": value}, check=True)
         assert out.stdout.strip() == expected
 
 
