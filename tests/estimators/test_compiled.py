@@ -184,11 +184,13 @@ def test_batched_filters_run_the_same_with_and_without_kernels(name, options, nu
                                atol=1e-12 * np.abs(runs[1][1]).max())
 
 
-def test_environment_variable_turns_the_kernels_off():
+def test_environment_variable_turns_the_kernels_off(tmp_path):
     code = "from fir_gym.estimators import _compiled; print(_compiled.ENABLED)"
     for value, expected in (("0", "False"), ("off", "False"), ("1", "True")):
+        # run outside the checkout: there, its fir_gym/ folder would shadow the install
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             env={**os.environ, "FIR_GYM_NUMBA": value}, check=True)
+                             env={**os.environ, "FIR_GYM_NUMBA": value}, cwd=tmp_path,
+                             check=True)
         assert out.stdout.strip() == expected
 
 
