@@ -33,7 +33,9 @@ def test_targets_report_ratios_and_verdicts():
                  "pendulum": [{"friction": "paper", "steps_per_s_ratio": 1.1},
                               {"friction": "coulomb", "steps_per_s_ratio": 0.8,
                                "inverted_pendulum_us": 20.0, "mujoco_us": 16.0}]},
-        "wrappers": {"vector": [{"env": "fir_gym/Orbit-v0", "mode": "sync", "ratio": 1.1}]},
+        "wrappers": {"vector": [{"env": "fir_gym/Orbit-v0", "mode": "sync", "ratio": 1.1},
+                                {"env": "fir_gym/Orbit-v0", "mode": "native", "ratio": 2.0,
+                                 "bare_us": 10.0, "ekf_floor_us": 4.0}]},
     }
     rows = {r["target"]: r for r in speed.targets(results)}
     assert rows["kf linear 2x1: single / filterpy"]["met"] is True
@@ -45,6 +47,10 @@ def test_targets_report_ratios_and_verdicts():
     coulomb = "PendulumSlider-v0 (coulomb) / InvertedPendulum-v5 steps per second"
     assert rows[coulomb]["ceiling"] == 1.25 and rows[coulomb]["met"] is False
     assert rows["PendulumSlider-v0 (paper) / InvertedPendulum-v5 steps per second"][
+        "ceiling"] is None
+    native = rows["VectorEstimatorObservation(ekf) Orbit-v0 native×64: wrapped / bare"]
+    assert native["met"] is False and native["ceiling"] == pytest.approx(1.4)
+    assert rows["VectorEstimatorObservation(ekf) Orbit-v0 sync×64: wrapped / bare"][
         "ceiling"] is None
     speed.print_targets(list(rows.values()))                 # prints without error
 
