@@ -311,12 +311,15 @@ def wrappers_section(quick: bool) -> dict[str, Any]:
 
 
 def _trivial_ekf_step(n_batch: int) -> Any:
-    """One batched EKF step on a one-state linear model: the fixed cost of a filter step
-    (argument checks, bookkeeping, divergence watch) with next to no algebra."""
-    from fir_gym.estimators import ExtendedKalmanFilter, LinearModel
+    """One batched EKF step on a one-state model whose callables return ready arrays: the
+    fixed cost of a filter step (argument checks, bookkeeping, divergence watch, the
+    compiled update) with no model evaluation to speak of."""
+    from fir_gym.estimators import ExtendedKalmanFilter, StateSpaceModel
 
-    ekf = ExtendedKalmanFilter(LinearModel(A=[[1.0]], C=[[1.0]], Q=[[1.0]], R=[[1.0]]),
-                               x0=np.zeros((n_batch, 1)))
+    one = np.ones((n_batch, 1, 1))
+    model = StateSpaceModel(f=lambda x, u: x, F=lambda x, u: one, h=lambda x: x,
+                            H=lambda x: one, Q=[[1.0]], R=[[1.0]])
+    ekf = ExtendedKalmanFilter(model, x0=np.zeros((n_batch, 1)))
     y = np.zeros((n_batch, 1))
     ekf.step(y)
     return lambda: ekf.step(y)
@@ -392,7 +395,8 @@ def print_targets(rows: list[dict[str, Any]]) -> None:
     print("   ceiling: the best ratio a floor measured in this run allows — VanDerPol: its "
           "Wiener increments alone (numpy's normal draws, 100 per sub-env step); "
           "PendulumSlider: MuJoCo's own steps with the friction law, no env around them; "
-          "wrapper: bare plus the fixed cost of a 64-system EKF step on a one-state model")
+          "wrapper: bare plus the fixed cost of a 64-system EKF step (one-state model, "
+          "callables returning ready arrays)")
 
 
 # ---------------------------------------------------------------------------- main
