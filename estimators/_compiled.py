@@ -24,16 +24,26 @@ try:  # pragma: no cover - exercised by whichever of the two installs runs the t
 except ImportError:  # pragma: no cover
     numba = None
 
-#: whether callers use the compiled kernels (``FIR_GYM_NUMBA=0`` turns them off)
-ENABLED: bool = numba is not None and os.environ.get("FIR_GYM_NUMBA", "1").strip().lower() \
-    not in ("0", "false", "no", "off")
+#: whether callers use the compiled kernels (``FIR_GYM_NUMBA=0`` turns them off, and so
+#: does ``NUMBA_DISABLE_JIT=1``: the loops would then run as plain Python, far slower than
+#: the numpy paths)
+ENABLED: bool = (numba is not None and not numba.config.DISABLE_JIT
+                 and os.environ.get("FIR_GYM_NUMBA", "1").strip().lower()
+                 not in ("0", "false", "no", "off"))
 
 
 def kernel(fn: Callable[..., Any]) -> Callable[..., Any] | None:
-    """``fn`` compiled by ``numba.njit`` (cached, no fast-math), or ``None`` without numba."""
+    """``fn`` compiled by ``numba.njit`` (cached, no fast-math), or ``None`` without numba.
+
+    Where numba finds no writable cache location (a read-only install without a
+    writable home), the kernel is compiled in each process instead of failing the import.
+    """
     if numba is None:
         return None
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    except RuntimeError:                    # "cannot cache function ...: no locator available"
+        return numba.njit(cache=False, nogil=True, error_model="numpy")(fn)
 
 
 def active(compiled: Callable[..., Any] | None) -> bool:

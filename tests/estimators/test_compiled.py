@@ -12,6 +12,7 @@ definite, ``x⁻, P⁻`` kept and NaN NIS where a measurement is missing.
 import os
 import subprocess
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -186,11 +187,13 @@ def test_batched_filters_run_the_same_with_and_without_kernels(name, options, nu
 
 def test_environment_variable_turns_the_kernels_off(tmp_path):
     code = "from fir_gym.estimators import _compiled; print(_compiled.ENABLED)"
-    for value, expected in (("0", "False"), ("off", "False"), ("1", "True")):
+    for variables, expected in (({"FIR_GYM_NUMBA": "0"}, "False"),
+                                ({"FIR_GYM_NUMBA": "off"}, "False"),
+                                ({"FIR_GYM_NUMBA": "1"}, "True"),
+                                ({"FIR_GYM_NUMBA": "1", "NUMBA_DISABLE_JIT": "1"}, "False")):
         # run outside the checkout: there, its fir_gym/ folder would shadow the install
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             env={**os.environ, "FIR_GYM_NUMBA": value}, cwd=tmp_path,
-                             check=True)
+                             env={**os.environ, **variables}, cwd=tmp_path, check=True)
         assert out.stdout.strip() == expected
 
 
@@ -287,3 +290,19 @@ def test_kalman_filter_with_per_system_covariances_equals_the_numpy_path(numpy_p
     np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=0, atol=1e-14)
     assert runs[0][2] and runs[1][2]                  # both reached the steady regime
+
+
+def test_kernel_without_a_cache_location_still_compiles(monkeypatch):
+    """numba refuses ``cache=True`` where no cache folder is writable; the kernel is then
+    compiled uncached rather than breaking ``import fir_gym``."""
+    calls, real_njit = [], numba.njit
+
+    def njit(**options):
+        calls.append(options["cache"])
+        if options["cache"]:
+            raise RuntimeError("cannot cache function 'f': no locator available")
+        return real_njit(**options)
+
+    monkeypatch.setattr(_compiled, "numba", types.SimpleNamespace(njit=njit))
+    compiled = _compiled.kernel(lambda x: 2.0 * x)
+    assert calls == [True, False] and compiled(1.5) == 3.0
