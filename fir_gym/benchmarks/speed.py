@@ -24,12 +24,15 @@ all) prints five sections:
    ``VectorEstimatorObservation`` with a batched EKF over 64 sub-envs of the sync
    and the native vector env: wrapped / bare step time (target ≤ 1.2 for the vector
    wrapper).
-5. **targets** — the targets above, measured, met or not.
+5. **targets** — the targets above, measured, met or not, with the ceiling a floor
+   measured in the same run allows (:mod:`.targets`, floors in :mod:`._floors`);
+   section 1 also prints each batched filter's gain over its own numpy path (the
+   compiled kernels off).
 
 Every figure is the best of a few timed blocks (the least disturbed by other load
 on the machine); compare ratios from one run, not times across runs. Set
 ``OPENBLAS_NUM_THREADS=1``: multi-threaded BLAS on tiny matrices only adds noise.
-The default run takes a few minutes; ``--quick`` about a tenth of that.
+The default run takes about two minutes; ``--quick`` about a tenth of that.
 """
 
 from __future__ import annotations
@@ -51,17 +54,14 @@ from fir_gym.estimators import _compiled
 
 from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
+from . import _floors
 from . import estimators as est_bench
 from . import fir as fir_bench
 from . import kalman as kalman_bench
 from ._timing import counting, env_stepper, interleaved, stepper, vector_stepper
+from .targets import print_targets, ratio, targets
 
 SECTIONS = ("kalman", "estimators", "envs", "wrappers")
-
-
-# ---------------------------------------------------------------------------- timing
-def _ratio(a: float | None, b: float | None) -> float | None:
-    return None if a is None or b is None or b == 0 else a / b
 
 
 # ---------------------------------------------------------------------------- 1. kalman
@@ -97,8 +97,8 @@ def kalman_section(quick: bool) -> dict[str, Any]:
         if _compiled.ENABLED:                           # the same filter on its numpy path
             big_numpy = kalman_bench.ours_stepper(cls, model, 1024, skip, **opts)
             for k in range(2000):
-                _numpy_path(big_numpy, k + 1)
-            runs["numpy"] = (counting(lambda k, step=big_numpy: _numpy_path(step, k)),
+                _floors.numpy_path(big_numpy, k + 1)
+            runs["numpy"] = (counting(lambda k, step=big_numpy: _floors.numpy_path(step, k)),
                              big_calls)
         fp = kalman_bench.filterpy_stepper(fname.split("-")[0], model, opts.get("alpha", 1.0))
         if fp is not None:
@@ -108,23 +108,14 @@ def kalman_section(quick: bool) -> dict[str, Any]:
         ref = 1e6 * t["filterpy"] if "filterpy" in t else None
         numpy_us = 1e6 * t["numpy"] / 1024 if "numpy" in t else None
         rows.append({"model": model.name, "filter": fname, "single_us": single,
-                     "batched_us": batched, "filterpy_us": ref, "ratio": _ratio(single, ref),
-                     "throughput_vs_filterpy": _ratio(ref, batched),
-                     "batched_numpy_us": numpy_us, "compiled_speedup": _ratio(numpy_us, batched)})
+                     "batched_us": batched, "filterpy_us": ref, "ratio": ratio(single, ref),
+                     "throughput_vs_filterpy": ratio(ref, batched),
+                     "batched_numpy_us": numpy_us, "compiled_speedup": ratio(numpy_us, batched)})
     efir = fir_bench.speed(steps=200 if quick else 500, repeats=5 if quick else 15)
     eb = _efir_batched(quick)
     efir_row = {"efir_us": 1e6 * efir["efir"], "ekf_us": 1e6 * efir["ekf"],
                 "efir_over_ekf": efir["ratio"], **eb}
     return {"rows": rows, "efir": efir_row}
-
-
-def _numpy_path(step: Any, k: int) -> Any:
-    """``step(k)`` with the compiled kernels switched off (the numpy reference path)."""
-    _compiled.ENABLED = False
-    try:
-        return step(k)
-    finally:
-        _compiled.ENABLED = True
 
 
 def _efir_batched(quick: bool) -> dict[str, Any]:
@@ -143,8 +134,8 @@ def _efir_batched(quick: bool) -> dict[str, Any]:
     if _compiled.ENABLED:
         slow = ExtendedFIRFilter(model, horizon=10, x0=x0)
         for k in range(12):
-            _numpy_path(lambda k: slow.step(ys[k], None if k == 0 else u), k)
-        runs["numpy"] = (counting(lambda k: _numpy_path(
+            _floors.numpy_path(lambda k: slow.step(ys[k], None if k == 0 else u), k)
+        runs["numpy"] = (counting(lambda k: _floors.numpy_path(
             lambda k: slow.step(ys[12 + k % 52], u), k)), 3 if quick else 10)
     fp = kalman_bench.filterpy_stepper("ekf", model, 1.0)
     if fp is not None:
@@ -154,8 +145,8 @@ def _efir_batched(quick: bool) -> dict[str, Any]:
     ref = 1e6 * t["filterpy"] if "filterpy" in t else None
     numpy_us = 1e6 * t["numpy"] / 1024 if "numpy" in t else None
     return {"batched_us": b, "filterpy_ekf_us": ref,
-            "throughput_vs_filterpy_ekf": _ratio(ref, b), "batched_numpy_us": numpy_us,
-            "compiled_speedup": _ratio(numpy_us, b)}
+            "throughput_vs_filterpy_ekf": ratio(ref, b), "batched_numpy_us": numpy_us,
+            "compiled_speedup": ratio(numpy_us, b)}
 
 
 def print_kalman(res: dict[str, Any]) -> None:
@@ -226,7 +217,7 @@ def envs_section(quick: bool) -> dict[str, Any]:
         runs = {f: (stepper("fir_gym/PendulumSlider-v0", friction=f), steps)
                 for f in ("none", "coulomb", "paper")}
         for f in ("coulomb", "paper"):                   # the floor: MuJoCo's own steps
-            runs[f"mujoco_{f}"] = (_mujoco_stepper(f), steps)
+            runs[f"mujoco_{f}"] = (_floors.mujoco_stepper(f), steps)
         try:
             runs["ip"] = (stepper("InvertedPendulum-v5"), steps)
         except Exception as err:  # gymnasium[mujoco] needs imageio
@@ -240,20 +231,9 @@ def envs_section(quick: bool) -> dict[str, Any]:
             physics = times.get(f"mujoco_{friction}")
             out["pendulum"].append({"friction": friction, "us": ours,
                                     "inverted_pendulum_us": ip,
-                                    "steps_per_s_ratio": _ratio(ip, ours),
+                                    "steps_per_s_ratio": ratio(ip, ours),
                                     "mujoco_us": None if physics is None else 1e6 * physics})
     return out
-
-
-def _mujoco_stepper(friction: str) -> Any:
-    """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
-    from fir_gym.envs import _mujoco_passive
-
-    env = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
-    env.reset(seed=0)
-    m, d, law = env.mj_model, env.mj_data, env._friction_law
-    nstep, callback = env.params["frame_skip"], None if law is None else law.callback
-    return lambda: _mujoco_passive.step(m, d, nstep, callback)
 
 
 def print_envs(res: dict[str, Any]) -> None:
@@ -262,9 +242,9 @@ def print_envs(res: dict[str, Any]) -> None:
     for r in res["plants"] + [r for r in res["references"] if "error" not in r]:
         rows.append([r["env"].removeprefix("fir_gym/"), r.get("unwrapped_us"), r.get("make_us"),
                      r.get("sync64_us"), r.get("native64_us"), r.get("native1024_us"),
-                     _ratio(r.get("unwrapped_us"), r.get("make_us")),
-                     _ratio(r.get("sync64_us"), r.get("native64_us")),
-                     _ratio(r.get("sync64_us"), r.get("native1024_us"))])
+                     ratio(r.get("unwrapped_us"), r.get("make_us")),
+                     ratio(r.get("sync64_us"), r.get("native64_us")),
+                     ratio(r.get("sync64_us"), r.get("native1024_us"))])
     print(format_table(["env", "unwrapped", "gym.make", "sync×64", "native×64", "native×1024",
                         "make/unwrapped speed", "native/sync ×64", "native/sync ×1024"], rows,
                        floatfmt=".3g"))
@@ -300,8 +280,8 @@ def wrappers_section(quick: bool) -> dict[str, Any]:
                     gym.make_vec(env_id, num_envs=64, vectorization_mode=mode), "ekf")
                 t = interleaved({"bare": (vector_stepper(bare), vsteps),
                                  "wrapped": (vector_stepper(wrapped), vsteps),
-                                 "fixed": (_trivial_ekf_step(64), vsteps),
-                                 "model": (_model_evaluation(wrapped.estimator), vsteps)},
+                                 "fixed": (_floors.trivial_ekf_step(64), vsteps),
+                                 "model": (_floors.model_evaluation(wrapped.estimator), vsteps)},
                                 reps)
                 b, w = 1e6 * t["bare"] / 64, 1e6 * t["wrapped"] / 64
                 vector.append({"env": env_id, "mode": "native" if mode != "sync" else "sync",
@@ -310,36 +290,6 @@ def wrappers_section(quick: bool) -> dict[str, Any]:
                 bare.close()
                 wrapped.close()
     return {"single": single, "vector": vector}
-
-
-def _trivial_ekf_step(n_batch: int) -> Any:
-    """One batched EKF step on a one-state model whose callables return ready arrays: the
-    fixed cost of a filter step (argument checks, bookkeeping, divergence watch, the
-    compiled update) with no model evaluation to speak of."""
-    from fir_gym.estimators import ExtendedKalmanFilter, StateSpaceModel
-
-    one = np.ones((n_batch, 1, 1))
-    model = StateSpaceModel(f=lambda x, u: x, F=lambda x, u: one, h=lambda x: x,
-                            H=lambda x: one, Q=[[1.0]], R=[[1.0]])
-    ekf = ExtendedKalmanFilter(model, x0=np.zeros((n_batch, 1)))
-    y = np.zeros((n_batch, 1))
-    ekf.step(y)
-    return lambda: ekf.step(y)
-
-
-def _model_evaluation(estimator: Any) -> Any:
-    """What an EKF step must evaluate of the plant's model: ``f, F`` and ``h, H`` (batched)."""
-    from fir_gym.estimators.extended import model_callables, model_linearizer
-
-    linearize, (_, _, h, H) = model_linearizer(estimator.model), model_callables(
-        estimator.model)
-    x, u = estimator.x, np.zeros((estimator.x.shape[0], estimator.model.n_u))
-
-    def evaluate() -> None:
-        x_next, _ = linearize(x, u)
-        h(x_next)
-        H(x_next)
-    return evaluate
 
 
 def print_wrappers(res: dict[str, Any]) -> None:
@@ -353,68 +303,6 @@ def print_wrappers(res: dict[str, Any]) -> None:
                        [[r["env"].removeprefix("fir_gym/"), r["mode"], r["bare_us"],
                          r["wrapped_us"], r["ekf_us"], r["ratio"]] for r in res["vector"]],
                        floatfmt=".3g"))
-
-
-# ---------------------------------------------------------------------------- 5. targets
-def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
-    """Every target of issues 3, 5, 7 and 9 with its measured ratio."""
-    out: list[dict[str, Any]] = []
-
-    def add(what: str, value: float | None, limit: float, upper: bool,
-            ceiling: float | None = None) -> None:
-        ok = None if value is None else (value <= limit if upper else value >= limit)
-        out.append({"target": what, "value": value, "limit": f"{'≤' if upper else '≥'} {limit:g}",
-                    "met": ok, "ceiling": ceiling})
-
-    k = results.get("kalman")
-    if k:
-        for r in k["rows"]:
-            tag = f"{r['filter']} {r['model']}"
-            if r["filter"] in ("kf", "kf-full", "ekf"):
-                add(f"{tag}: single / filterpy", r["ratio"], 1.0, True)
-                add(f"{tag}: B=1024 µs per system-step", r["batched_us"], 0.5, True)
-            else:
-                add(f"{tag}: single / filterpy", r["ratio"], 0.5, True)
-                add(f"{tag}: B=1024 µs per system-step", r["batched_us"], 2.0, True)
-            add(f"{tag}: B=1024 throughput / looped filterpy", r["throughput_vs_filterpy"],
-                25.0, False)
-        add("efir n=3 N=10: B=1024 µs per system-step", k["efir"]["batched_us"], 5.0, True)
-        add("efir n=3 N=10: B=1024 throughput / looped filterpy EKF",
-            k["efir"]["throughput_vs_filterpy_ekf"], 25.0, False)
-    e = results.get("envs")
-    if e:
-        for r in e["plants"]:
-            if r["env"].endswith("VanDerPol-v0"):
-                add("VanDerPol-v0 native×1024 / sync steps per second",
-                    _ratio(r["sync64_us"], r["native1024_us"]), 100.0, False,
-                    _ratio(r["sync64_us"], r.get("wiener1024_us")))
-        for p in e["pendulum"]:
-            add(f"PendulumSlider-v0 ({p['friction']}) / InvertedPendulum-v5 steps per second",
-                p["steps_per_s_ratio"], 1.0, False,
-                _ratio(p.get("inverted_pendulum_us"), p.get("mujoco_us")))
-    w = results.get("wrappers")
-    if w:
-        for r in w["vector"]:
-            floor = r.get("ekf_floor_us")
-            add(f"VectorEstimatorObservation(ekf) {r['env'].removeprefix('fir_gym/')} "
-                f"{r['mode']}×64: wrapped / bare", r["ratio"], 1.2, True,
-                None if floor is None else (r["bare_us"] + floor) / r["bare_us"])
-    return out
-
-
-def print_targets(rows: list[dict[str, Any]]) -> None:
-    print("\n5. targets\n")
-    print(format_table(["target", "measured", "limit", "met", "ceiling"],
-                       [[r["target"], r["value"], r["limit"],
-                         "—" if r["met"] is None else ("yes" if r["met"] else "NO"),
-                         r.get("ceiling")]
-                        for r in rows], floatfmt=".3g"))
-    print("   ceiling: the best ratio a floor measured in this run allows — VanDerPol: its "
-          "Wiener increments alone (numpy's normal draws, 100 per sub-env step); "
-          "PendulumSlider: MuJoCo's own steps with the friction law, no env around them; "
-          "wrapper: bare plus what a 64-system EKF step cannot skip — the plant model's "
-          "f, F, h, H and the filter's fixed cost (a one-state model whose callables return "
-          "ready arrays)")
 
 
 # ---------------------------------------------------------------------------- main

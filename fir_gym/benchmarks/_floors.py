@@ -1,0 +1,67 @@
+"""References and floors the speed command times beside the real thing.
+
+Each is one call, timed in the same alternating blocks as what it bounds:
+:func:`numpy_path` (a step with the compiled kernels off), :func:`mujoco_stepper`
+(MuJoCo's own steps of one PendulumSlider-v0 env step), :func:`trivial_ekf_step`
+(the filter's fixed cost) and :func:`model_evaluation` (what an EKF step must evaluate
+of a plant's model).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from fir_gym.estimators import _compiled
+
+
+def numpy_path(step: Any, k: int) -> Any:
+    """``step(k)`` with the compiled kernels switched off (the numpy reference path)."""
+    _compiled.ENABLED = False
+    try:
+        return step(k)
+    finally:
+        _compiled.ENABLED = True
+
+
+def mujoco_stepper(friction: str) -> Any:
+    """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
+    from fir_gym.envs import _mujoco_passive
+
+    env = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
+    env.reset(seed=0)
+    m, d, law = env.mj_model, env.mj_data, env._friction_law
+    nstep, callback = env.params["frame_skip"], None if law is None else law.callback
+    return lambda: _mujoco_passive.step(m, d, nstep, callback)
+
+
+def trivial_ekf_step(n_batch: int) -> Any:
+    """One batched EKF step on a one-state model whose callables return ready arrays: the
+    fixed cost of a filter step (argument checks, bookkeeping, divergence watch, the
+    compiled update) with no model evaluation to speak of."""
+    from fir_gym.estimators import ExtendedKalmanFilter, StateSpaceModel
+
+    one = np.ones((n_batch, 1, 1))
+    model = StateSpaceModel(f=lambda x, u: x, F=lambda x, u: one, h=lambda x: x,
+                            H=lambda x: one, Q=[[1.0]], R=[[1.0]])
+    ekf = ExtendedKalmanFilter(model, x0=np.zeros((n_batch, 1)))
+    y = np.zeros((n_batch, 1))
+    ekf.step(y)
+    return lambda: ekf.step(y)
+
+
+def model_evaluation(estimator: Any) -> Any:
+    """What an EKF step must evaluate of the plant's model: ``f, F`` and ``h, H`` (batched)."""
+    from fir_gym.estimators.extended import model_callables, model_linearizer
+
+    linearize, (_, _, h, H) = model_linearizer(estimator.model), model_callables(
+        estimator.model)
+    x, u = estimator.x, np.zeros((estimator.x.shape[0], estimator.model.n_u))
+
+    def evaluate() -> None:
+        x_next, _ = linearize(x, u)
+        h(x_next)
+        H(x_next)
+    return evaluate
