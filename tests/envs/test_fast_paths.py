@@ -147,6 +147,24 @@ def test_diagonal_measurement_noise_path_equals_the_matrix_product():
     assert _diagonal_of(np.array([[1.0, 0.1], [0.1, 1.0]])) is None
 
 
+def on_both_paths(monkeypatch, fn, *args):
+    """``fn(*args)`` with the compiled kernels on, then off (their numpy/Python paths)."""
+    out = []
+    for enabled in (True, False):
+        monkeypatch.setattr(_compiled, "ENABLED", enabled)
+        out.append(fn(*args))
+    return out
+
+
+def outputs_match(compiled, reference, check):
+    """``check`` each output pair of two tuples (``None`` only where both are)."""
+    for a, b in zip(compiled, reference, strict=True):
+        if b is None:
+            assert a is None
+            continue
+        check(a, b)
+
+
 @pytest.mark.parametrize("shape", [(2,), (1, 2), (5, 2), (40, 2), (300, 2)])
 @pytest.mark.parametrize("jacobian", [False, True])
 @pytest.mark.parametrize("noisy", [False, True])
@@ -160,16 +178,10 @@ def test_van_der_pol_compiled_loop_equals_the_python_loop(monkeypatch, shape, ja
     x = 2.0 * rng.normal(size=shape)
     u = rng.uniform(-1, 1, size=shape[:-1] + (1,))
     dW = 0.05 * rng.normal(size=(100,) + shape[:-1]) if noisy else None
-    monkeypatch.setattr(_compiled, "ENABLED", True)
-    compiled = dyn.integrate(x, u, dW, jacobian)
-    monkeypatch.setattr(_compiled, "ENABLED", False)
-    python = dyn.integrate(x, u, dW, jacobian)
-    for a, b in zip(compiled, python, strict=True):
-        if b is None:
-            assert a is None
-            continue
+    def same_bits(a, b):
         assert type(a) is type(b) and np.shape(a) == np.shape(b)
         np.testing.assert_array_equal(a, b)
+    outputs_match(*on_both_paths(monkeypatch, dyn.integrate, x, u, dW, jacobian), same_bits)
 
 
 def test_van_der_pol_rollout_is_the_same_with_and_without_the_compiled_loop(monkeypatch):
@@ -195,10 +207,7 @@ def test_orbit_compiled_loop_equals_the_python_loop(monkeypatch, shape, jacobian
     x = np.array([8.0, 2.0]) + 0.1 * rng.normal(size=shape)
     u = rng.uniform(-1, 1, size=shape[:-1] + (1,))
     fn = dyn.F if jacobian else dyn.f
-    monkeypatch.setattr(_compiled, "ENABLED", True)
-    compiled = fn(x, u)
-    monkeypatch.setattr(_compiled, "ENABLED", False)
-    python = fn(x, u)
+    compiled, python = on_both_paths(monkeypatch, fn, x, u)
     assert compiled.shape == python.shape
     np.testing.assert_array_equal(compiled, python)
 
@@ -220,13 +229,7 @@ def test_pendulum_slider_compiled_rk4_equals_the_numpy_rk4(monkeypatch, friction
     x = rng.normal(size=shape) * [0.05, 0.3, 1.0, 2.0]
     u = rng.normal(size=shape[:-1] + (1,))
     theta = dyn.theta if shape[0] % 2 else 0.3 * np.abs(rng.normal(size=shape[:-1] + (2,)))
-    monkeypatch.setattr(_compiled, "ENABLED", True)
-    compiled = dyn.propagate(x, u, theta, jacobian)
-    monkeypatch.setattr(_compiled, "ENABLED", False)
-    reference = dyn.propagate(x, u, theta, jacobian)
-    for a, b in zip(compiled, reference, strict=True):
-        if b is None:
-            assert a is None
-            continue
+    def round_off(a, b):
         assert a.shape == b.shape
         np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13 * np.abs(b).max())
+    outputs_match(*on_both_paths(monkeypatch, dyn.propagate, x, u, theta, jacobian), round_off)
