@@ -220,3 +220,26 @@ predict_update = kernel(_predict_update)
 #: ``cholesky_rows(S (B, m, m)) -> L`` (lower), all-NaN where ``S`` is not positive definite:
 #: :func:`~._kalman_linalg.cholesky` system by system; ``None`` without numba
 cholesky_rows = kernel(_cholesky_rows)
+
+
+def _spd_inverse_batch(S: np.ndarray) -> np.ndarray:
+    n_b, m, _ = S.shape
+    W = np.empty((n_b, m, m))
+    c = CHUNK
+    Ss, Ws, L, ok = np.empty((m, m, c)), np.empty((m, m, c)), np.ones((m, m, c)), \
+        np.empty(c, dtype=np.bool_)
+    for b0 in range(0, n_b, c):
+        nb = min(c, n_b - b0)
+        _load(S, b0, nb, Ss)
+        _spd_inverse(Ss, Ws, L, ok, nb)
+        for t in range(nb):
+            for i in range(m):
+                for j in range(m):
+                    W[b0 + t, i, j] = Ws[i, j, t] if ok[t] else np.nan
+    return W
+
+
+#: ``spd_inverse_batch(S (B, m, m)) -> S⁻¹``, all-NaN where ``S`` is not positive definite:
+#: :func:`~._kalman_linalg.spd_inverse` (closed form for m <= 2, else Cholesky) in one
+#: compiled pass; ``None`` without numba
+spd_inverse_batch = kernel(_spd_inverse_batch)

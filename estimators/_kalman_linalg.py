@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._compiled import active
-from ._kalman_kernels import cholesky_rows
+from ._kalman_kernels import cholesky_rows, spd_inverse_batch
 from ._validation import FloatArray
 
 
@@ -136,4 +136,6 @@ def spd_inverse(S: FloatArray) -> FloatArray:
         W[:, 1, 1] = a / det
         W[:, 0, 1] = W[:, 1, 0] = -b / det
         return W
+    if active(spd_inverse_batch):
+        return spd_inverse_batch(np.ascontiguousarray(S))
     return cho_solve(cholesky(S), np.broadcast_to(eye(m), S.shape))

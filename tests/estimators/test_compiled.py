@@ -306,3 +306,19 @@ def test_kernel_without_a_cache_location_still_compiles(monkeypatch):
     monkeypatch.setattr(_compiled, "numba", types.SimpleNamespace(njit=njit))
     compiled = _compiled.kernel(lambda x: 2.0 * x)
     assert calls == [True, False] and compiled(1.5) == 3.0
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 4, 6])
+def test_spd_inverse_equals_the_numpy_path_and_flags_indefinite_rows(m, numpy_path):
+    from fir_gym.estimators._kalman_linalg import spd_inverse
+    rng = np.random.default_rng(20 + m)
+    S = spd(rng, (70,), m)
+    S[5] = -S[5]                                     # not positive definite
+    got = spd_inverse(S)
+    with numpy_path, np.errstate(invalid="ignore", divide="ignore"):
+        want = spd_inverse(S)
+    ok = np.isfinite(want).all(axis=(1, 2))
+    np.testing.assert_array_equal(np.isfinite(got).all(axis=(1, 2)), ok)
+    assert not ok[5] and ok.sum() == 69
+    close(got[ok], want[ok], np.abs(want[ok]).max())
+    close(got[ok] @ S[ok], np.broadcast_to(np.eye(m), S[ok].shape), 1.0)
