@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fir_gym.estimators._validation import FloatArray, as_covariance, positive
+from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
 from . import _mujoco_passive
 from ._base import PlantEnv, psd_sqrt
@@ -225,8 +225,7 @@ class PendulumSliderEnv(PlantEnv):
         if unknown:
             raise TypeError(f"unexpected keyword argument(s) {unknown}; physical parameters are "
                             f"{sorted(PAPER_PARAMS)}")
-        if friction not in FRICTION_MODES:
-            raise ValueError(f"friction must be one of {FRICTION_MODES}; got {friction!r}")
+        one_of("friction", friction, FRICTION_MODES)
         phys = {**PAPER_PARAMS, **{k: float(v) for k, v in physical.items()}}
         for name in ("m1", "m2", "l", "I_c", "k", "g"):
             positive(name, phys[name])

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fir_gym.estimators._compiled import active
-from fir_gym.estimators._validation import FloatArray, positive
+from fir_gym.estimators._validation import FloatArray, one_of, positive
 from fir_gym.estimators.augment import ParametricModel
 
 from ._interval_kernels import slider_rk4
@@ -77,8 +77,7 @@ class PendulumSliderDynamics:
                           ("coulomb_velocity", coulomb_velocity)):
             if not np.isfinite(val) or (name != "l0" and val < 0):
                 raise ValueError(f"{name} must be a finite non-negative number; got {val!r}")
-        if friction not in FRICTION_MODES:
-            raise ValueError(f"friction must be one of {FRICTION_MODES}; got {friction!r}")
+        one_of("friction", friction, FRICTION_MODES)
         self.m1, self.m2, self.l, self.I_c, self.k, self.l0 = m1, m2, l, I_c, k, l0
         self.M0, self.mu, self.g = M0, mu, g
         self.dt = positive("dt", dt)

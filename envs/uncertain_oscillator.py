@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._validation import FloatArray, as_covariance, positive
+from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv
@@ -172,9 +172,7 @@ class UncertainOscillatorEnv(PlantEnv):
         initial_state_cov: ArrayLike | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if uncertainty not in UNCERTAINTY_READINGS:
-            raise ValueError(
-                f"uncertainty must be one of {UNCERTAINTY_READINGS}; got {uncertainty!r}")
+        one_of("uncertainty", uncertainty, UNCERTAINTY_READINGS)
         self.uncertainty = uncertainty
         self.delta_schedule = _check_schedule(delta_schedule)
         params = {

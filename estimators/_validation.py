@@ -7,6 +7,7 @@ the argument and says what was expected (ARCHITECTURE.md, "Names and style").
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -115,6 +116,14 @@ def input_batch(u: ArrayLike | None, x: FloatArray, n_u: int) -> FloatArray:
     if u_.ndim not in (1, 2) or u_.shape[-1] != n_u:
         raise ValueError(f"u must have shape ({n_u},) or (B, {n_u}); got shape {u_.shape}")
     return u_
+
+
+def one_of(name: str, value: Any, choices: Iterable[Any]) -> Any:
+    """Check that ``value`` is one of ``choices``; returns it."""
+    choices = tuple(choices)
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {choices}; got {value!r}")
+    return value
 
 
 def positive(name: str, value: Any, *, integer: bool = False) -> Any:

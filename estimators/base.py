@@ -42,7 +42,7 @@ import numpy as np
 import scipy.stats
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_batch, as_covariance, positive
+from ._validation import FloatArray, as_batch, as_covariance, one_of, positive
 from .model import StateSpaceModel
 
 NAN_POLICIES = ("raise", "skip")
@@ -79,8 +79,7 @@ class Estimator(ABC):
     ) -> None:
         if not isinstance(model, StateSpaceModel):
             raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
-        if nan_policy not in NAN_POLICIES:
-            raise ValueError(f"nan_policy must be one of {NAN_POLICIES}; got {nan_policy!r}")
+        one_of("nan_policy", nan_policy, NAN_POLICIES)
         self.model = model
         self._n_y = model.n_y
         self.nan_policy = nan_policy

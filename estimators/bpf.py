@@ -63,7 +63,7 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, positive
+from ._validation import FloatArray, one_of, positive
 from .base import Estimator
 from .continuous import ContinuousModel
 from .kalman import update_kernel
@@ -175,8 +175,7 @@ def bpf_riccati(P0: ArrayLike, M: ArrayLike, h: float, *, form: str = "restart")
     (:func:`bpf_riccati_global_step`). Nothing is checked or repaired: the
     global form's loss of accuracy shows in ``condition``.
     """
-    if form not in RICCATI_FORMS:
-        raise ValueError(f"form must be one of {RICCATI_FORMS}; got {form!r}")
+    one_of("form", form, RICCATI_FORMS)
     P = np.asarray(P0, dtype=np.float64)
     M = np.asarray(M, dtype=np.float64)
     Ps, Pbars, conds = [P], [], []
@@ -281,8 +280,7 @@ class BlockPulseKalmanFilter(Estimator):
         if not model.has_factorisation:
             raise ValueError(f"model {model.name!r} has no factorisation A(x); the block-pulse "
                              "filter freezes A(x) on each interval (paper 002, eq 2.2)")
-        if riccati not in RICCATI_FORMS:
-            raise ValueError(f"riccati must be one of {RICCATI_FORMS}; got {riccati!r}")
+        one_of("riccati", riccati, RICCATI_FORMS)
         self.continuous_model = model
         self.riccati = riccati
         self.max_condition = positive("max_condition", max_condition)

@@ -43,7 +43,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, positive
+from ._validation import FloatArray, one_of, positive
 from .base import Estimator
 from .continuous import ContinuousModel
 from .kalman import update_kernel
@@ -148,9 +148,7 @@ class ContinuousDiscreteEKF(Estimator):
         if not isinstance(model, ContinuousModel):
             raise TypeError(f"model must be a ContinuousModel (e.g. env.unwrapped."
                             f"continuous_model); got {type(model).__name__}")
-        if measurement not in MEASUREMENT_MODELS:
-            raise ValueError(f"measurement must be one of {MEASUREMENT_MODELS}; "
-                             f"got {measurement!r}")
+        one_of("measurement", measurement, MEASUREMENT_MODELS)
         self.continuous_model = model
         self.measurement = measurement
         self.substeps = positive("substeps", substeps, integer=True)

@@ -48,9 +48,10 @@ from numpy.typing import ArrayLike
 
 from . import _efir_lean
 from ._fir_bank import WindowBank
-from ._validation import FloatArray, as_covariance, positive
+from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import WindowedEstimator
 from .extended import model_callables, model_linearizer
+from .fir_gains import WINDOW_FORMS
 from .model import StateSpaceModel
 from .registry import register_estimator
 
@@ -104,12 +105,9 @@ class ExtendedFIRFilter(WindowedEstimator):
             raise TypeError(f"{type(self).__name__} needs a StateSpaceModel with f, h, F, H; "
                             f"got {type(model).__name__}")
         self.horizon = positive("horizon", horizon, integer=True)
-        if form not in ("filter", "predictor"):
-            raise ValueError(f"form must be 'filter' or 'predictor'; got {form!r}")
-        if nominal not in NOMINALS:
-            raise ValueError(f"nominal must be one of {NOMINALS}; got {nominal!r}")
-        if startup not in STARTUPS:
-            raise ValueError(f"startup must be one of {STARTUPS}; got {startup!r}")
+        one_of("form", form, WINDOW_FORMS)
+        one_of("nominal", nominal, NOMINALS)
+        one_of("startup", startup, STARTUPS)
         self.form, self.nominal, self.startup = form, nominal, startup
         self._R = as_covariance("model.R", model.R, definite=True)
         Qx = np.asarray(model.GQGT)

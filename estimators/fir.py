@@ -19,9 +19,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._fir_bank import WindowBank, information_is_regular
-from ._validation import FloatArray, as_covariance, positive
+from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import WindowedEstimator
 from .fir_gains import (
+    WINDOW_FORMS,
     GainResult,
     Window,
     batch_gain,
@@ -116,10 +117,8 @@ class FIRFilter(WindowedEstimator):
             raise TypeError(f"{type(self).__name__} needs a LinearModel or "
                             f"TimeVaryingLinearModel; got {type(model).__name__}")
         self.horizon = positive("horizon", horizon, integer=True)
-        if form not in ("filter", "predictor"):
-            raise ValueError(f"form must be 'filter' or 'predictor'; got {form!r}")
-        if gain not in GAINS:
-            raise ValueError(f"gain must be one of {sorted(GAINS)}; got {gain!r}")
+        one_of("form", form, WINDOW_FORMS)
+        one_of("gain", gain, sorted(GAINS))
         self.form, self.gain = form, gain
         self._target = "smoother" if self._smoother else form
         self.time_invariant = bool(getattr(model, "time_invariant", False))

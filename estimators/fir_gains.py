@@ -37,10 +37,12 @@ import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
 from ._fir_bank import RANK_RTOL, information_is_regular
-from ._validation import FloatArray
+from ._validation import FloatArray, one_of
 from .model import StateSpaceModel, SystemMatrices
 
 FORMS = ("filter", "predictor", "smoother")
+#: the forms a FIR filter runs in (the smoother is its own class)
+WINDOW_FORMS = FORMS[:2]
 
 
 class Window(NamedTuple):
@@ -93,8 +95,7 @@ def model_window(model: StateSpaceModel, k0: int, horizon: int) -> Window:
 
 
 def _target(form: str, L: int) -> int:
-    if form not in FORMS:
-        raise ValueError(f"form must be one of {FORMS}; got {form!r}")
+    one_of("form", form, FORMS)
     return {"filter": L - 1, "predictor": L, "smoother": 0}[form]
 
 

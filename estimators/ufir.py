@@ -35,7 +35,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray
+from ._validation import FloatArray, one_of
 from .fir import FIRFilter, _window_from_history
 from .fir_gains import GainResult, Window, information_is_regular
 from .model import StateSpaceModel
@@ -123,8 +123,7 @@ class UFIRFilter(FIRFilter):
     def __init__(self, model: StateSpaceModel, *, horizon: int, form: str = "filter",
                  method: str = "batch", x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+        one_of("method", method, METHODS)
         self.method = method
         super().__init__(model, horizon=horizon, form=form, gain="batch", x0=x0, P0=P0,
                          **options)

@@ -21,6 +21,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from fir_gym.estimators._validation import one_of
+
 from .wrappers import wrap_observation
 
 ALGORITHMS = ("ppo", "sac")
@@ -51,8 +53,7 @@ class RunConfig:
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGORITHMS:
-            raise ValueError(f"algo must be one of {ALGORITHMS}; got {self.algo!r}")
+        one_of("algo", self.algo, ALGORITHMS)
         if self.steps <= 0 or self.n_envs <= 0:
             raise ValueError(f"steps and n_envs must be positive; got {self.steps}, {self.n_envs}")
 

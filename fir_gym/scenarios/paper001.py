@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from fir_gym.envs.carrier_motion import PAPER_A21, PAPER_A22, PAPER_NOISE_INPUT, carrier_continuous
+from fir_gym.estimators._validation import one_of
 from fir_gym.estimators.bounds import corners, delta_pi1, delta_pi2, worst_case
 from fir_gym.estimators.continuous import ContinuousModel
 from fir_gym.estimators.continuous_fir import fir_riccati, kalman_bucy
@@ -58,8 +59,7 @@ def carrier_model(corner: Mapping[str, float] | None = None) -> ContinuousModel:
 def pair(corner: Mapping[str, float], nominal: str = "perturbed"
          ) -> tuple[ContinuousModel, ContinuousModel]:
     """``(true, nominal)`` systems for an uncertainty ``corner`` under a reading."""
-    if nominal not in NOMINAL_READINGS:
-        raise ValueError(f"nominal must be one of {NOMINAL_READINGS}; got {nominal!r}")
+    one_of("nominal", nominal, NOMINAL_READINGS)
     paper, perturbed = carrier_model(), carrier_model(corner)
     return (paper, perturbed) if nominal == "perturbed" else (perturbed, paper)
 

@@ -16,6 +16,8 @@ import os
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from fir_gym.estimators._validation import one_of
+
 BACKENDS = ("serial", "joblib", "dask")
 
 
@@ -35,8 +37,7 @@ class Runner:
 
     def __init__(self, backend: str = "serial", *, jobs: int | None = None,
                  scheduler: str | None = None, progress: bool = False) -> None:
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}; got {backend!r}")
+        one_of("backend", backend, BACKENDS)
         if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):
             raise ValueError(f"jobs must be a positive integer or None; got {jobs!r}")
         if scheduler is not None and backend != "dask":

@@ -12,6 +12,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from fir_gym.estimators import Estimator, estimator_class
+from fir_gym.estimators._validation import one_of
 
 OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
 
@@ -133,8 +134,7 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, estimator=estimator,
                                                  observation=observation, **options)
         gym.Wrapper.__init__(self, env)
-        if observation not in OBSERVATION_KINDS:
-            raise ValueError(f"observation must be one of {OBSERVATION_KINDS}; got {observation!r}")
+        one_of("observation", observation, OBSERVATION_KINDS)
         self.estimator = resolve_estimator(env, estimator, options)
         self.observation_kind = observation
         self._x0 = self.estimator.x

@@ -12,6 +12,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from fir_gym.estimators import Estimator
+from fir_gym.estimators._validation import one_of
 
 from .estimator_observation import OBSERVATION_KINDS, build_estimator, estimator_class_of
 
@@ -46,8 +47,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         if mode != AutoresetMode.NEXT_STEP:
             raise ValueError(f"VectorEstimatorObservation follows next-step autoreset; this "
                              f"vector env uses {mode}")
-        if observation not in OBSERVATION_KINDS:
-            raise ValueError(f"observation must be one of {OBSERVATION_KINDS}; got {observation!r}")
+        one_of("observation", observation, OBSERVATION_KINDS)
         if isinstance(estimator, Estimator):
             raise TypeError("give VectorEstimatorObservation an estimator class or name (it "
                             "builds one batched estimator); got an instance")
