@@ -110,12 +110,7 @@ def input_batch(u: ArrayLike | None, x: FloatArray, n_u: int) -> FloatArray:
     """
     if u is None:
         return np.zeros(x.shape[:-1] + (n_u,))
-    u_ = np.asarray(u, dtype=np.float64)
-    if u_.ndim == 0 and n_u == 1:
-        u_ = u_.reshape(1)
-    if u_.ndim not in (1, 2) or u_.shape[-1] != n_u:
-        raise ValueError(f"u must have shape ({n_u},) or (B, {n_u}); got shape {u_.shape}")
-    return u_
+    return as_batch("u", u, n_u)
 
 
 def one_of(name: str, value: Any, choices: Iterable[Any]) -> Any:
