@@ -17,13 +17,7 @@ def best_time(fn: Callable[[], Any], budget: float, repeats: int = 3, max_calls:
     fn()
     first = time.perf_counter() - t0
     calls = int(min(max_calls, max(1, budget / max(first, 1e-7))))
-    best = first
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / calls)
-    return best
+    return min(first, per_call(fn, calls, repeats, warmup=0))
 
 
 def per_call(fn: Callable[[], Any], calls: int, repeats: int, warmup: int = 1) -> float:
@@ -69,16 +63,7 @@ def counting(step: Callable[[int], Any]) -> Callable[[], Any]:
 def stepper(env_id: str, unwrap: bool = True, **kwargs: Any) -> Callable[[], None]:
     """One env step (reset when the episode ends), of the unwrapped env or of ``gym.make``'s."""
     env = gym.make(env_id, **kwargs)
-    env = env.unwrapped if unwrap else env
-    env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype) \
-        if env.action_space.shape else env.action_space.sample()
-
-    def step() -> None:
-        out = env.step(action)
-        if out[2] or out[3]:
-            env.reset()
-    return step
+    return env_stepper(env.unwrapped if unwrap else env)
 
 
 def vector_stepper(env: Any) -> Callable[[], None]:
@@ -88,8 +73,11 @@ def vector_stepper(env: Any) -> Callable[[], None]:
 
 
 def env_stepper(env: gym.Env) -> Callable[[], None]:
+    """One step of ``env`` with a fixed action (zeros, or a sample of a shapeless space),
+    resetting it when the episode ends."""
     env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype) \
+        if env.action_space.shape else env.action_space.sample()
 
     def step() -> None:
         out = env.step(action)
