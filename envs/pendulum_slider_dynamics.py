@@ -84,6 +84,9 @@ class PendulumSliderDynamics:
         self.substeps = positive("substeps", substeps, integer=True)
         self.friction, self.coulomb_velocity = friction, float(coulomb_velocity)
         self.input_scale = float(input_scale)
+        #: the compiled step's constants ``[m1, m2, l, g, k, l0, I_c, v_c]`` and friction code
+        self._kernel_constants = (np.array([m1, m2, l, g, k, l0, I_c, self.coulomb_velocity],
+                                           dtype=np.float64), FRICTION_MODES.index(friction))
 
     @property
     def theta(self) -> FloatArray:
@@ -185,13 +188,11 @@ class PendulumSliderDynamics:
                                                      FloatArray | None]:
         lead = x.shape[:-1]
         U = self.input_scale * np.asarray(u, dtype=np.float64)[..., 0]
-        consts = np.array([self.m1, self.m2, self.l, self.g, self.k, self.l0, self.I_c,
-                           self.coulomb_velocity])
+        consts, friction = self._kernel_constants
         z, Fz, Fp = slider_rk4(np.asarray(x, dtype=np.float64).reshape(-1, 4),
                                np.ascontiguousarray(U).reshape(-1),
                                np.asarray(theta, dtype=np.float64).reshape(-1, 2), consts,
-                               FRICTION_MODES.index(self.friction), self.dt / self.substeps,
-                               self.substeps, jacobian)
+                               friction, self.dt / self.substeps, self.substeps, jacobian)
         if not jacobian:
             return z.reshape(lead + (4,)), None, None
         return z.reshape(lead + (4,)), Fz.reshape(lead + (4, 4)), Fp.reshape(lead + (4, 2))

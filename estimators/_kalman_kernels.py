@@ -51,6 +51,31 @@ def _symmetrize_sum_loops(A: np.ndarray, B: np.ndarray, nb: int) -> None:
                 aji[t] = v
 
 
+def _cholesky_loops(S: np.ndarray, L: np.ndarray, ok: np.ndarray, nb: int) -> None:
+    """The lower Cholesky factor ``L`` (lower triangle written) of symmetric SoA blocks
+    ``S`` (lower triangle read); ``ok`` False where ``S`` is not positive definite (its
+    pivot is then taken as 1 so the loop runs on; the caller discards that factor)."""
+    m = S.shape[0]
+    for t in range(nb):
+        ok[t] = True
+    for j in range(m):
+        for t in range(nb):
+            d = S[j, j, t]
+            for k in range(j):
+                d -= L[j, k, t] * L[j, k, t]
+            ok[t] = ok[t] and d > 0.0
+            L[j, j, t] = np.sqrt(d) if d > 0.0 else 1.0
+        for i in range(j + 1, m):
+            for t in range(nb):
+                c = S[i, j, t]
+                for k in range(j):
+                    c -= L[i, k, t] * L[j, k, t]
+                L[i, j, t] = c / L[j, j, t]
+
+
+_cholesky = kernel(_cholesky_loops)
+
+
 def _spd_inverse_loops(S: np.ndarray, W: np.ndarray, L: np.ndarray, ok: np.ndarray,
                        nb: int) -> None:
     """``W = S⁻¹`` for symmetric SoA blocks ``S`` (lower triangle read); ``ok`` False where
@@ -71,21 +96,7 @@ def _spd_inverse_loops(S: np.ndarray, W: np.ndarray, L: np.ndarray, ok: np.ndarr
             W[0, 1, t] = -b / det
             W[1, 0, t] = -b / det
         return
-    for t in range(nb):
-        ok[t] = True
-    for j in range(m):                                   # Cholesky S = L Lᵀ
-        for t in range(nb):
-            d = S[j, j, t]
-            for k in range(j):
-                d -= L[j, k, t] * L[j, k, t]
-            ok[t] = ok[t] and d > 0.0
-            L[j, j, t] = np.sqrt(d) if d > 0.0 else 1.0
-        for i in range(j + 1, m):
-            for t in range(nb):
-                c = S[i, j, t]
-                for k in range(j):
-                    c -= L[i, k, t] * L[j, k, t]
-                L[i, j, t] = c / L[j, j, t]
+    _cholesky(S, L, ok, nb)
     for col in range(m):                                 # W = L⁻ᵀ L⁻¹, column by column
         for i in range(m):                               # forward: L z = e_col
             for t in range(nb):
@@ -115,21 +126,19 @@ def _load_loops(M: np.ndarray, b0: int, nb: int, out: np.ndarray) -> None:
 def _cholesky_rows(S: np.ndarray) -> np.ndarray:
     n_b, m, _ = S.shape
     L = np.zeros_like(S)
-    for b in range(n_b):
-        for j in range(m):
-            d = S[b, j, j]
-            for k in range(j):
-                d -= L[b, j, k] * L[b, j, k]
-            if not d > 0.0:
-                L[b] = np.nan
-                break
-            ljj = np.sqrt(d)
-            L[b, j, j] = ljj
-            for i in range(j + 1, m):
-                c = S[b, i, j]
-                for k in range(j):
-                    c -= L[b, i, k] * L[b, j, k]
-                L[b, i, j] = c / ljj
+    c = CHUNK
+    Ss, Ls, ok = np.empty((m, m, c)), np.empty((m, m, c)), np.empty(c, dtype=np.bool_)
+    for b0 in range(0, n_b, c):
+        nb = min(c, n_b - b0)
+        _load(S, b0, nb, Ss)
+        _cholesky(Ss, Ls, ok, nb)
+        for t in range(nb):
+            for i in range(m):
+                for j in range(i + 1):
+                    L[b0 + t, i, j] = Ls[i, j, t] if ok[t] else np.nan
+                if not ok[t]:
+                    for j in range(i + 1, m):
+                        L[b0 + t, i, j] = np.nan
     return L
 
 

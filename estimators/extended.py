@@ -83,6 +83,7 @@ class ExtendedKalmanFilter(Estimator):
         self._f, self._F, self._h, self._H = model_callables(model)
         self._linearize = model_linearizer(model)
         self._GQGt = model.GQGT
+        self._R_batch = as_batch(model.R)                  # the compiled step's layout
 
     def _make_lean(self) -> Any:
         if not _small.same_hooks(self, ExtendedKalmanFilter):
@@ -101,7 +102,7 @@ class ExtendedKalmanFilter(Estimator):
         x, F = self._linearize(x, u)
         if x.shape[0] > 1 and active(predict_update):      # one compiled loop over systems
             return predict_update(x, as_batch(P), as_batch(F), self._GQGt, y - self._h(x),
-                                  as_batch(self._H(x)), as_batch(self.model.R), valid)
+                                  as_batch(self._H(x)), self._R_batch, valid)
         P = predict_covariance(P, F, self._GQGt)
         e = y - self._h(x)
         x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)

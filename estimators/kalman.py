@@ -264,6 +264,7 @@ class KalmanFilter(Estimator):
         self._constant = getattr(model, "time_invariant", True)
         if self._constant:
             self._mats = self._prepare(model.matrices(0))
+            self._A_batch = as_batch(model.matrices(0)[0])  # the compiled step's layout
         super().__init__(model, x0=x0, P0=P0, **options)
 
     @staticmethod
@@ -307,8 +308,9 @@ class KalmanFilter(Estimator):
         elif P.shape[0] > 1 and active(predict_update):  # one covariance per system: compiled
             mats = self._matrices(self._k)
             _, _, C, Ct, _, R = mats
-            x_new, P_new, nis = predict_update(x, as_batch(P), as_batch(At.T), Qd,
-                                               y - rmul(x, Ct), C[None], R[None], valid)
+            A = self._A_batch if self._constant else as_batch(At.T)
+            x_new, P_new, nis = predict_update(x, as_batch(P), A, Qd, y - rmul(x, Ct),
+                                               C[None], R[None], valid)
             if self._constant and valid is self._all_valid and _converged(P_new, P):
                 K, W, _ = gain_kernel(predict_covariance(P, At.T, Qd), C, R)
                 self._steady = (P_new, K, W, Ct)
