@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import scipy.stats
+from sample_models import random_linear_3x1
 
 import fir_gym  # noqa: F401  (registers the environments)
 from fir_gym.envs.orbit import NOMINAL_MU, TRUE_MU
@@ -19,11 +20,7 @@ X0_FILTER = [7.997, 1.992]               # the filter's (and nominal's) initial 
 
 
 def linear_model() -> LinearModel:
-    rng = np.random.default_rng(0)
-    A = rng.normal(size=(3, 3))
-    A *= 1.08 / np.max(np.abs(np.linalg.eigvals(A)))
-    return LinearModel(A=A, C=rng.normal(size=(1, 3)), B=rng.normal(size=(3, 1)),
-                       Q=0.1 * np.eye(3), R=[[0.4]])
+    return random_linear_3x1(1.08)
 
 
 @pytest.mark.parametrize("nominal", ["open-loop", "reanchor"])

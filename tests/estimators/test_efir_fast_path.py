@@ -14,7 +14,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from sample_models import duffing_model
+from estimator_checks import assert_rejects_bad_input
+from sample_models import duffing_model, random_linear_3x1
 
 import fir_gym  # noqa: F401  (registers the environments)
 from fir_gym.benchmarks.fir import sim2_model
@@ -45,11 +46,7 @@ def scalar_model() -> StateSpaceModel:
 
 
 def linear_model() -> LinearModel:
-    rng = np.random.default_rng(0)
-    A = rng.normal(size=(3, 3))
-    A *= 1.02 / np.max(np.abs(np.linalg.eigvals(A)))
-    return LinearModel(A=A, C=rng.normal(size=(1, 3)), B=rng.normal(size=(3, 1)),
-                       Q=0.1 * np.eye(3), R=[[0.4]])
+    return random_linear_3x1(1.02)
 
 
 def orbit_model() -> StateSpaceModel:
@@ -242,12 +239,7 @@ def test_inputs_of_other_shapes_and_bad_inputs() -> None:
         xb = b.step(y[None], None if k == 0 else u[None])
         assert same(xa, xb[0]) and same(a.P, b.P[0])
     assert a._lean is not None
-    with pytest.raises(ValueError, match="y must be finite"):
-        a.step(np.array([np.nan]), [0.0])
-    with pytest.raises(ValueError, match="y must have shape"):
-        a.step(np.zeros(2), [0.0])
-    with pytest.raises(ValueError, match="u must"):
-        a.step(np.zeros(1), [np.inf])
+    assert_rejects_bad_input(a)
     with pytest.raises(ValueError, match="u must"):
         a.step(np.zeros(1), [0.0, 1.0])
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fir_gym.estimators import StateSpaceModel
+from fir_gym.estimators import LinearModel, StateSpaceModel
 
 DUFFING_DT = 0.05
 
@@ -53,3 +53,13 @@ def duffing_model() -> StateSpaceModel:
     d = Duffing()
     return StateSpaceModel(f=d.f, h=d.h, F=d.F, H=d.H, Q=np.diag([1e-4, 1e-3, 1e-6]),
                            R=np.diag([1e-2, 2e-2]), n_u=1, dt=DUFFING_DT)
+
+
+def random_linear_3x1(radius: float) -> LinearModel:
+    """A random 3-state, 1-output, 1-input model (seed 0), ``A`` scaled to spectral radius
+    ``radius``; ``Q = 0.1 I``, ``R = 0.4``."""
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(3, 3))
+    A *= radius / np.max(np.abs(np.linalg.eigvals(A)))
+    return LinearModel(A=A, C=rng.normal(size=(1, 3)), B=rng.normal(size=(3, 1)),
+                       Q=0.1 * np.eye(3), R=[[0.4]])
