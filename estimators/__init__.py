@@ -10,6 +10,7 @@ from .base import Estimator
 from .bpf import BlockPulseKalmanFilter
 from .cd_ekf import ContinuousDiscreteEKF
 from .continuous import ContinuousModel
+from .continuous_estimator import ContinuousEstimator
 from .discretize import discretize_lti, linear_model_from_continuous
 from .efir import ExtendedFIRFilter
 from .extended import ExtendedKalmanFilter
@@ -34,6 +35,7 @@ __all__ = [
     "AugmentedModel",
     "BlockPulseKalmanFilter",
     "ContinuousDiscreteEKF",
+    "ContinuousEstimator",
     "ContinuousModel",
     "CubatureSigmaPoints",
     "Estimator",

@@ -65,6 +65,8 @@ class Estimator(ABC):
     uses_prior: ClassVar[bool] = True
     #: whether the filter reports an error covariance ``P`` (a controller may observe it)
     provides_covariance: ClassVar[bool] = True
+    #: the plant attribute holding the model this filter is built from
+    model_attribute: ClassVar[str] = "model"
 
     def __init__(
         self,

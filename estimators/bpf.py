@@ -58,15 +58,14 @@ step is the Kalman update of the prior with the point measurement ``y[0]`` of
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, one_of, positive
-from .base import Estimator
 from .continuous import ContinuousModel
-from .kalman import update_kernel
+from .continuous_estimator import ContinuousEstimator
 from .registry import register_estimator
 
 __all__ = ["BlockPulseKalmanFilter", "RiccatiPath", "RiccatiStep", "bpf_riccati",
@@ -245,7 +244,7 @@ def _ratio(xi: FloatArray) -> tuple[FloatArray, FloatArray]:
     return 0.5 * (P + np.swapaxes(P, -1, -2)), _cond(U)
 
 
-class BlockPulseKalmanFilter(Estimator):
+class BlockPulseKalmanFilter(ContinuousEstimator):
     """The block-pulse Kalman filter of paper 002 on a :class:`ContinuousModel` (batched).
 
     Args:
@@ -268,23 +267,16 @@ class BlockPulseKalmanFilter(Estimator):
     """
 
     name = "bpf-kf"
-    #: the plant attribute a wrapper should build this filter from
-    model_attribute: ClassVar[str] = "continuous_model"
 
     def __init__(self, model: ContinuousModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, riccati: str = "restart",
                  max_condition: float = 1e12, **options: Any) -> None:
-        if not isinstance(model, ContinuousModel):
-            raise TypeError(f"model must be a ContinuousModel (e.g. env.unwrapped."
-                            f"continuous_model); got {type(model).__name__}")
-        if not model.has_factorisation:
+        self.riccati = one_of("riccati", riccati, RICCATI_FORMS)
+        self.max_condition = positive("max_condition", max_condition)
+        if isinstance(model, ContinuousModel) and not model.has_factorisation:
             raise ValueError(f"model {model.name!r} has no factorisation A(x); the block-pulse "
                              "filter freezes A(x) on each interval (paper 002, eq 2.2)")
-        one_of("riccati", riccati, RICCATI_FORMS)
-        self.continuous_model = model
-        self.riccati = riccati
-        self.max_condition = positive("max_condition", max_condition)
-        super().__init__(model.sampled(), x0=x0, P0=P0, **options)
+        super().__init__(model, x0=x0, P0=P0, **options)
 
     def _reset_state(self) -> None:
         self._psi: FloatArray | None = None
@@ -310,7 +302,7 @@ class BlockPulseKalmanFilter(Estimator):
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         cm = self.continuous_model
-        x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), cm.R / cm.dt, valid)
+        x, P, nis = super()._update(x, P, y, valid)
         n_b = x.shape[0]
         self._broken = np.zeros(n_b, bool)
         self._condition = np.ones(n_b)

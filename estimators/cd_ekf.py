@@ -33,19 +33,20 @@ blow up numerically — a failure of the integrator, not of the EKF.
   reports what it costs.
 
 The first step is the Kalman update of the prior with the point measurement
-``y[0]`` of ``h(x(t0))``, covariance ``R/h`` (the Gymnasium plant's convention).
+``y[0]`` of ``h(x(t0))``, covariance ``R/h`` (the Gymnasium plant's convention), that
+of every :class:`~.continuous_estimator.ContinuousEstimator`.
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, one_of, positive
-from .base import Estimator
 from .continuous import ContinuousModel
+from .continuous_estimator import ContinuousEstimator
 from .kalman import update_kernel
 from .registry import register_estimator
 
@@ -123,7 +124,7 @@ def cd_ekf_propagate(
     return (z[0], S[0]) if single else (z, S)
 
 
-class ContinuousDiscreteEKF(Estimator):
+class ContinuousDiscreteEKF(ContinuousEstimator):
     """Continuous–discrete EKF on a :class:`ContinuousModel` (batched).
 
     Args:
@@ -139,26 +140,13 @@ class ContinuousDiscreteEKF(Estimator):
     """
 
     name = "cd-ekf"
-    #: the plant attribute a wrapper should build this filter from
-    model_attribute: ClassVar[str] = "continuous_model"
 
     def __init__(self, model: ContinuousModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, measurement: str = "average",
                  substeps: int = 20, **options: Any) -> None:
-        if not isinstance(model, ContinuousModel):
-            raise TypeError(f"model must be a ContinuousModel (e.g. env.unwrapped."
-                            f"continuous_model); got {type(model).__name__}")
-        one_of("measurement", measurement, MEASUREMENT_MODELS)
-        self.continuous_model = model
-        self.measurement = measurement
+        self.measurement = one_of("measurement", measurement, MEASUREMENT_MODELS)
         self.substeps = positive("substeps", substeps, integer=True)
-        super().__init__(model.sampled(), x0=x0, P0=P0, **options)
-
-    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        cm = self.continuous_model
-        x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), cm.R / cm.dt, valid)
-        return x, P, nis
+        super().__init__(model, x0=x0, P0=P0, **options)
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:

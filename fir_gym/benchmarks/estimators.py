@@ -39,7 +39,7 @@ def _applicable(env: gym.Env) -> list[tuple[str, Any, dict[str, Any]]]:
     out = []
     for name in estimator_names():
         cls = estimator_class(name)
-        model = getattr(plant, getattr(cls, "model_attribute", "model"), None)
+        model = getattr(plant, cls.model_attribute, None)
         if model is None:
             continue
         opts: dict[str, Any] = {"x0": x0, "P0": P0} if x0 is not None else {}

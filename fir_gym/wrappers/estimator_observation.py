@@ -43,7 +43,7 @@ def build_estimator(cls: type[Estimator], plant_attr: Callable[[str], Any],
     (:class:`~fir_gym.wrappers.VectorEstimatorObservation`) differ only in
     ``plant_attr``.
     """
-    attribute = getattr(cls, "model_attribute", "model")
+    attribute = cls.model_attribute
     model = plant_attr(attribute)
     if model is None:
         raise ValueError(f"the plant has no `{attribute}`: {cls.__name__} needs the plant's "
