@@ -34,8 +34,8 @@ def _weighted_sums_loops(D: np.ndarray, Wm: np.ndarray, Wc: np.ndarray, d: np.nd
 _weighted_sums = kernel(_weighted_sums_loops)
 
 
-def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray,
+                   symmetric: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n_b, N, p = A.shape
     q = Z.shape[2]
     sum_Wc = 0.0
@@ -45,8 +45,10 @@ def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
     mean_z = np.empty((n_b, q))
     C = np.empty((n_b, p, q))
     c = CHUNK                                  # systems per block, held D[point, j, system]
-    Da, Dz = np.empty((N, p, c)), np.empty((N, q, c))
-    da, ca, dz, cz = np.empty((p, c)), np.empty((p, c)), np.empty((q, c)), np.empty((q, c))
+    Da, da, ca = np.empty((N, p, c)), np.empty((p, c)), np.empty((p, c))
+    # the covariance of one set of points (A is Z): its deviations and sums once
+    Dz, dz, cz = (Da, da, ca) if symmetric else (np.empty((N, q, c)), np.empty((q, c)),
+                                                  np.empty((q, c)))
     Cs = np.empty((p, q, c))
     for b0 in range(0, n_b, c):
         nb = min(c, n_b - b0)
@@ -54,12 +56,14 @@ def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
             for i in range(N):
                 for j in range(p):
                     Da[i, j, t] = A[b0 + t, i, j] - A[b0 + t, 0, j]
-                for j in range(q):
-                    Dz[i, j, t] = Z[b0 + t, i, j] - Z[b0 + t, 0, j]
+                if not symmetric:
+                    for j in range(q):
+                        Dz[i, j, t] = Z[b0 + t, i, j] - Z[b0 + t, 0, j]
         _weighted_sums(Da, Wm, Wc, da, ca, nb)
-        _weighted_sums(Dz, Wm, Wc, dz, cz, nb)
+        if not symmetric:
+            _weighted_sums(Dz, Wm, Wc, dz, cz, nb)
         for j in range(p):
-            for k in range(q):
+            for k in range(j + 1 if symmetric else q):
                 acc = Cs[j, k]
                 for t in range(nb):
                     acc[t] = 0.0
@@ -74,12 +78,14 @@ def _cross_moments(A: np.ndarray, Z: np.ndarray, Wm: np.ndarray, Wc: np.ndarray
         for t in range(nb):
             for j in range(p):
                 mean_a[b0 + t, j] = A[b0 + t, 0, j] + da[j, t]
-                for k in range(q):
-                    C[b0 + t, j, k] = Cs[j, k, t]
+                for k in range(q):            # a covariance: its lower triangle, mirrored
+                    C[b0 + t, j, k] = Cs[max(j, k), min(j, k), t] if symmetric else \
+                        Cs[j, k, t]
             for k in range(q):
                 mean_z[b0 + t, k] = Z[b0 + t, 0, k] + dz[k, t]
     return mean_a, mean_z, C
 
 
-#: ``cross_moments(A (B, N, p), Z (B, N, q), Wm, Wc) -> (ā, z̄, Σ Wᶜ (Aᵢ − ā)(Zᵢ − z̄)ᵀ)``
+#: ``cross_moments(A (B, N, p), Z (B, N, q), Wm, Wc, symmetric) -> (ā, z̄, Σ Wᶜ (Aᵢ − ā)(Zᵢ −
+#: z̄)ᵀ)``; ``symmetric`` says ``Z`` is ``A`` (a covariance: computed once, exactly symmetric)
 cross_moments = kernel(_cross_moments)

@@ -190,7 +190,7 @@ def _mean_covariance(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatA
     """``z̄ = Σ Wᵐ Zᵢ`` and ``Σ Wᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ`` (symmetric) of ``Z (B, N, k)``."""
     if active(cross_moments):
         Z = np.ascontiguousarray(Z)
-        mean, _, P = cross_moments(Z, Z, sp.Wm, sp.Wc)
+        mean, _, P = cross_moments(Z, Z, sp.Wm, sp.Wc, True)
         return mean, P
     mean, D, d, c = _moments(Z, sp)
     return mean, symmetrize(_cross(D, d, c, D, d, c, sp))
@@ -317,7 +317,7 @@ class UnscentedKalmanFilter(Estimator):
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
         if active(cross_moments):
             y_hat, S = _mean_covariance(Z, sp)
-            Pxz = cross_moments(np.ascontiguousarray(X), Z, sp.Wm, sp.Wc)[2]
+            Pxz = cross_moments(np.ascontiguousarray(X), Z, sp.Wm, sp.Wc, False)[2]
         else:
             y_hat, DZ, dz, cz = _moments(Z, sp)
             _, DX, dx, cx = _moments(X, sp)

@@ -122,8 +122,9 @@ def test_cross_moments_equal_the_numpy_moments(points, numpy_path):
     B, n = 70, points.n
     X = points.sigma_points(rng.normal(size=(B, n)), spd(rng, (B,), n, 0.2))
     Z = np.sin(X[..., :2]) + X[..., 1:3] ** 2
-    mean_x, mean_z, Pxz = cross_moments(X, Z, points.Wm, points.Wc)
+    mean_x, mean_z, Pxz = cross_moments(X, Z, points.Wm, points.Wc, False)
     mz, Pz = unscented_transform(Z, points)
+    np.testing.assert_array_equal(Pz, Pz.swapaxes(1, 2))          # a covariance: symmetric
     with numpy_path:
         mz_ref, Pz_ref = unscented_transform(Z, points)
         mx_ref, _ = unscented_transform(X, points)
