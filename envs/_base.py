@@ -25,6 +25,18 @@ class does what must be identical everywhere:
   they are "probably too low/high" — the warning is expected.
   ``info["state"]`` is a fresh copy of the true state ``x[k]``.
 * **Reset options.** ``reset(options={"state": x0})`` starts from a given state.
+* **Rewards and episode end (honest tasks).** Every per-step reward is a *saturated
+  cost*: ``-min(cost, cost_cap)`` (a non-finite cost counts as ``cost_cap``), so it
+  is finite and never below ``-cost_cap``, the plant's documented worst rate. The
+  step on which a plant terminates (it left its physical domain) is paid
+  ``-cost_cap * (1 + steps left to max_episode_steps)``: the terminal step and every
+  step the episode would still have run, at the worst rate. Ending an episode early
+  therefore never improves its return. ``max_episode_steps`` is a constructor
+  argument defaulting to the registered time limit (``default_max_episode_steps``);
+  ``gym.make(id, max_episode_steps=N)`` sets only Gymnasium's ``TimeLimit``, so a
+  shorter ``N`` makes the penalty count more steps than remain (still honest); for a
+  longer one set ``env.unwrapped.max_episode_steps = N`` too (fir-gym's own tools,
+  the native vector env and :func:`fir_gym.training.make_sb3_vec_env` do).
 """
 
 from __future__ import annotations
@@ -39,7 +51,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._validation import as_covariance, as_vector
+from fir_gym.estimators._validation import as_covariance, as_vector, positive
 
 FloatArray = NDArray[np.float64]
 
@@ -57,6 +69,10 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     action_names: ClassVar[tuple[str, ...]] = ()
     #: the FIR window (measurements) a wrapper uses when the user gives none
     default_horizon: ClassVar[int] = 10
+    #: the registered time limit (``gym.spec(id).max_episode_steps`` mirrors it)
+    default_max_episode_steps: ClassVar[int] = 1000
+    #: the worst per-step cost (the reward's floor is ``-cost_cap``; set by each plant)
+    cost_cap: float = math.inf
 
     def __init__(
         self,
@@ -68,6 +84,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         initial_state_cov: ArrayLike | None,
         measurement_cov: ArrayLike,
         render_mode: str | None,
+        max_episode_steps: int | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -75,6 +92,9 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
                 f"got {render_mode!r}"
             )
         self.render_mode = render_mode
+        self.max_episode_steps = (self.default_max_episode_steps if max_episode_steps is None
+                                  else positive("max_episode_steps", max_episode_steps,
+                                                    integer=True))
         self.params: dict[str, Any] = dict(params)
         overrides = dict(default_nominal or {})
         if nominal is not None:
@@ -195,7 +215,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         x_next, extra = self._transition(x, a, self.time_step, self.np_random)
         self.time_step += 1
         terminated = not bool(self._in_domain(x_next))
-        reward = float(self._reward(x, a, x_next))
+        reward = (float(self._reward(x, a, x_next)) if not terminated
+                  else float(self._terminal_reward(self.time_step)))
         self.state = x_next
         self._last_extra = extra
         # ``a`` is a fresh array made by _check_action: no copy needed for info
@@ -227,6 +248,12 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         return canvas.image
 
     # ------------------------------------------------------------------ helpers
+    def _terminal_reward(self, steps_taken: Any) -> Any:
+        """The reward of a terminating step, after ``steps_taken`` steps (int or array):
+        ``-cost_cap`` for it and for each step left to :attr:`max_episode_steps`."""
+        left = np.maximum(self.max_episode_steps - np.asarray(steps_taken), 0)
+        return -self.cost_cap * (1.0 + left)
+
     def _check_action(self, action: ArrayLike) -> tuple[FloatArray, bool]:
         shape = self.action_space.shape
         if shape == (1,) and type(action) is np.ndarray and action.shape == shape \
@@ -250,6 +277,14 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
             raise ValueError(f"action must be finite; got {a}")
         clipped = a.clip(-1.0, 1.0)
         return clipped, bool((clipped != a).any())
+
+
+def saturated_cost(cost: Any, cap: float) -> Any:
+    """``min(cost, cap)`` elementwise, with a NaN cost counted as ``cap`` (float or array):
+    the per-step cost of every plant's reward, bounded by its worst rate."""
+    if isinstance(cost, float):
+        return cost if cost < cap else cap
+    return np.where(cost < cap, cost, cap)
 
 
 def _diagonal_of(M: FloatArray) -> FloatArray | None:
