@@ -138,19 +138,22 @@ class PlantVectorEnv(VectorEnv):
         live = ~done if any_done else self._everyone
         x_next, extra = plant._transition(x, A, self.steps, self._rng(live))
         with np.errstate(over="ignore", invalid="ignore"):   # rows outside the domain
-            reward = np.broadcast_to(np.asarray(plant._reward(x, A, x_next), dtype=np.float64),
-                                     (self.num_envs,)).copy()
+            reward = np.asarray(plant._reward(x, A, x_next), dtype=np.float64)
+        if reward.shape != (self.num_envs,):
+            reward = np.broadcast_to(reward, (self.num_envs,)).copy()
         terminated = ~np.asarray(plant._in_domain(x_next), dtype=bool)
-        self.steps += 1
+        steps = self.steps
+        steps += 1
         if terminated.any():
             reward[terminated] = plant._terminal_reward(self.steps[terminated])
-        truncated = (self.steps >= self.max_episode_steps if self.max_episode_steps
+        truncated = (steps >= self.max_episode_steps if self.max_episode_steps
                      else np.zeros(self.num_envs, dtype=bool))
-        finite = np.all(np.isfinite(x_next), axis=1)
-        safe = x_next if finite.all() else np.where(finite[:, None], x_next, x)
-        # never measure a non-finite state (a single env repeats its last observation)
-        obs = plant._measure(safe, extra, self._rng(live & finite))
-        if not finite.all():
+        if np.isfinite(x_next).all():
+            obs = plant._measure(x_next, extra, self._rng(live))
+        else:   # never measure a non-finite state (a single env repeats its last observation)
+            finite = np.all(np.isfinite(x_next), axis=1)
+            obs = plant._measure(np.where(finite[:, None], x_next, x), extra,
+                                 self._rng(live & finite))
             obs[~finite] = self._last_obs[~finite]
         if any_done:                                # next-step autoreset
             self._restart(done, x_next, obs)
@@ -158,8 +161,8 @@ class PlantVectorEnv(VectorEnv):
             terminated[done] = False
             truncated[done] = False
         info = {"state": x_next.copy(), "action": A, "action_clipped": clipped}
-        info.update({key: np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
-                     for key, v in extra.items()})
+        for key, v in extra.items():
+            info[key] = np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
         ended = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
             info = self._info(info)
@@ -216,13 +219,13 @@ class PlantVectorEnv(VectorEnv):
         A = np.asarray(actions, dtype=np.float64)
         if A.shape != shape:
             raise ValueError(f"actions must have shape {shape}; got shape {A.shape}")
-        if not np.all(np.isfinite(A)):
+        if not np.isfinite(A).all():
             raise ValueError("actions must be finite")
-        clipped = np.clip(A, -1.0, 1.0)
-        return clipped, np.any(clipped != A, axis=1)
+        clipped = A.clip(-1.0, 1.0)
+        return clipped, (clipped != A).any(axis=1)
 
     def _info(self, info: dict[str, Any]) -> dict[str, Any]:
-        mask = np.ones(self.num_envs, dtype=bool)
+        mask = np.ones(self.num_envs, dtype=bool)         # every sub-env has every key
         out: dict[str, Any] = {}
         for key, value in info.items():
             out[key] = value

@@ -233,7 +233,7 @@ class OrbitEnv(PlantEnv):
 
     def _in_domain(self, x: FloatArray) -> Any:
         r = x[..., 0]
-        return np.all(np.isfinite(x), axis=-1) & (self.r_min < r) & (r < self.r_max)
+        return np.isfinite(x).all(axis=-1) & (self.r_min < r) & (r < self.r_max)
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = OrbitDynamics(positive("nominal mu", params["mu"]), params["euler_dt"],

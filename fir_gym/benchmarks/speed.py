@@ -58,10 +58,11 @@ from . import _floors
 from . import estimators as est_bench
 from . import fir as fir_bench
 from . import kalman as kalman_bench
+from . import training as training_bench
 from ._timing import counting, env_stepper, interleaved, stepper, vector_stepper
 from .targets import print_targets, ratio, targets
 
-SECTIONS = ("kalman", "estimators", "envs", "wrappers")
+SECTIONS = ("kalman", "estimators", "envs", "wrappers", "training")
 
 
 # ---------------------------------------------------------------------------- 1. kalman
@@ -309,7 +310,8 @@ def print_wrappers(res: dict[str, Any]) -> None:
 RUNNERS = {"kalman": (kalman_section, print_kalman),
            "estimators": (est_bench.run, print_estimators),
            "envs": (envs_section, print_envs),
-           "wrappers": (wrappers_section, print_wrappers)}
+           "wrappers": (wrappers_section, print_wrappers),
+           "training": (training_bench.run, training_bench.print_results)}
 
 
 def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = True

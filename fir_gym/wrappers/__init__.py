@@ -3,14 +3,17 @@
 from .baselines import MeasurementObservation, TrueStateObservation
 from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
 from .factory import wrap_observation
+from .measurement_stack import MeasurementStack, VectorMeasurementStack
 from .vector_estimator_observation import VectorEstimatorObservation
 
 __all__ = [
     "OBSERVATION_KINDS",
     "EstimatorObservation",
     "MeasurementObservation",
+    "MeasurementStack",
     "TrueStateObservation",
     "VectorEstimatorObservation",
+    "VectorMeasurementStack",
     "default_prior",
     "wrap_observation",
 ]

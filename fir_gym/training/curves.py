@@ -1,0 +1,73 @@
+"""Learning curves of runs, from their monitor files."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+def learning_curve(run_dir: str | Path, bins: int = 20
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean training-episode return against timesteps, from the run's monitor file.
+
+    The run's ``VecMonitor`` writes one line per finished episode of any sub-env, in
+    the order they finish, with its return ``r``, length ``l`` and wall time ``t``; the
+    lengths of the episodes finished so far add up to (about) the timesteps taken.
+    Empty bins are NaN.
+    """
+    rows: list[tuple[float, float, float]] = []
+    for path in sorted(Path(run_dir).glob("*monitor.csv")):
+        lines = path.read_text().splitlines()[2:]           # a JSON header, then "r,l,t"
+        for line in lines:
+            r, length, t = line.split(",")[:3]
+            rows.append((float(t), float(r), float(length)))
+    if not rows:
+        return np.zeros(0), np.zeros(0)
+    data = np.array(sorted(rows))                            # by wall time: finish order
+    steps = np.cumsum(data[:, 2])
+    edges = np.linspace(0, steps[-1], bins + 1)
+    idx = np.clip(np.digitize(steps, edges) - 1, 0, bins - 1)
+    centers = 0.5 * (edges[1:] + edges[:-1])
+    means = np.array([data[idx == b, 1].mean() if np.any(idx == b) else np.nan
+                      for b in range(bins)])
+    return centers, means
+
+
+def plot_learning_curves(runs: dict[str, Sequence[str | Path]], path: str | Path,
+                         title: str = "") -> Path | None:
+    """Save one learning curve per kind (mean over its runs); None without matplotlib.
+
+    ``runs`` maps a label (a kind) to its run folders; kinds without a monitor file
+    (classical controllers) are drawn as a horizontal line when given as a number.
+    """
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for label, folders in runs.items():
+        curves = [learning_curve(folder) for folder in folders]
+        curves = [c for c in curves if len(c[0])]
+        if not curves:
+            continue
+        x = curves[0][0]
+        y = np.nanmean([np.interp(x, cx, np.where(np.isnan(cy), np.nanmean(cy), cy))
+                        for cx, cy in curves], axis=0)
+        ax.plot(x, y, label=label)
+    ax.set_xlabel("timesteps")
+    ax.set_ylabel("training episode return")
+    if title:
+        ax.set_title(title)
+    if ax.lines:
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no training episode finished", ha="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
