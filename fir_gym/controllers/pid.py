@@ -6,13 +6,15 @@ VanDerPol-v0 (x1 at 0) and PendulumSlider-v0 (the slider's position) — from th
 measurement the plant returns (an env that observes the measurement):
 
     e[k] = setpoint − y[k]
-    I[k] = I[k−1] + e[k] Δt                       (held while the output saturates)
+    I[k] = I[k−1] + e[k] Δt                       (clamped while the output saturates)
     D[k] = α D[k−1] − (1 − α) (y[k] − y[k−1]) / Δt,   α = τ / (τ + Δt)
     a[k] = clip(u_ff + kp e[k] + ki I[k] + kd D[k], −1, 1)
 
 in the plant's normalised action units, with the derivative on the measurement (no
 kick at a setpoint change) low-passed with time constant ``tau`` (the measurements
-are noisy), conditional integration against wind-up, and the operating point's input
+are noisy), clamping against wind-up (while the output would pass a limit, the
+integral goes no further than the value that puts it at the limit), and the operating
+point's input
 ``u_ff`` as feed-forward (the hover thrust, the oscillator's holding force). The
 memory ``(I, y[k−1], D)`` of each env travels in ``predict``'s ``state``, as a
 recurrent policy's does, and is cleared where ``episode_start`` is set. Defaults for
@@ -86,13 +88,21 @@ class PIDController(Controller):
         error = self.setpoint - y
         g = self.gains
         trial = integral + error * self.dt
-        raw = self.feedforward + g["kp"] * error + g["ki"] * trial + g["kd"] * derivative
-        low, high = self._low[0], self._high[0]
-        # conditional integration: keep the integral where the output saturates and the
-        # error would push it further
-        winding = ((raw > high) & (error * g["ki"] > 0)) | ((raw < low) & (error * g["ki"] < 0))
-        integral = np.where(winding, integral, trial)
-        action = self.feedforward + g["kp"] * error + g["ki"] * integral + g["kd"] * derivative
+        rest = self.feedforward + g["kp"] * error + g["kd"] * derivative
+        if g["ki"] != 0.0:
+            # clamping against wind-up, on the integral's share of the output c = ki I: where
+            # the output would pass a limit while the error pushes it on, c goes no further
+            # than the limit (and never back); elsewhere it integrates
+            low, high = self._low[0] - rest, self._high[0] - rest
+            old, new = g["ki"] * integral, g["ki"] * trial
+            up, down = (rest + new > self._high[0]) & (new > old), \
+                (rest + new < self._low[0]) & (new < old)
+            share = np.where(up, np.maximum(old, np.minimum(new, high)),
+                             np.where(down, np.minimum(old, np.maximum(new, low)), new))
+            integral = share / g["ki"]
+        else:
+            integral = trial
+        action = rest + g["ki"] * integral
         return action[:, None], np.stack([integral, y, derivative], axis=1)
 
     def __repr__(self) -> str:
