@@ -114,9 +114,9 @@ class VectorMeasurementStack(gym.vector.VectorWrapper):
         ended = info.get("_final_obs") if self._same_step else None
         self._push(Y, u)
         if ended is not None and ended.any():
-            last = np.asarray(info["final_obs"], dtype=np.float64).reshape(self.num_envs,
-                                                                           self._n_y)
-            self._y[ended, -1] = last[ended]
+            final = info["final_obs"]      # an array, or (sync/async) an object array
+            for i in np.flatnonzero(ended):
+                self._y[i, -1] = np.asarray(final[i], dtype=np.float64).reshape(self._n_y)
             info = dict(info)
             info["final_obs"] = self._window()
             fresh = ended

@@ -108,8 +108,9 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
                          u: NDArray[np.float64]) -> dict[str, Any]:
         """Same-step mode: the ended episodes' last estimates, then restart their systems."""
         last = Y.copy()
-        last[ended] = np.asarray(info["final_obs"], dtype=np.float64).reshape(
-            self.num_envs, -1)[ended]
+        final = info["final_obs"]          # an array, or (sync/async) an object array
+        for i in np.flatnonzero(ended):
+            last[i] = np.asarray(final[i], dtype=np.float64).reshape(-1)
         finisher = copy.deepcopy(self.estimator)      # the others' step is not taken twice
         x_last = finisher.step(last, u)
         info = dict(info)
