@@ -62,10 +62,11 @@ class PIDController(Controller):
         for name, value in self.gains.items():
             if not np.isfinite(value):
                 raise ValueError(f"{name} must be finite; got {value!r}")
-        self.output = point.output if output is None else int(output)
+        index = point.output if output is None else output
         n_y = len(self.plant.measurement_names)
-        if not 0 <= self.output < n_y:
+        if index is None or not 0 <= int(index) < n_y:
             raise ValueError(f"output must be a measurement index in [0, {n_y}); got {output!r}")
+        self.output = int(index)
         self.setpoint = point.setpoint if setpoint is None else float(setpoint)
         self.dt = float(self.plant.model.dt)
         self.tau = 5.0 * self.dt if tau is None else float(tau)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +36,7 @@ def learning_curve(run_dir: str | Path, bins: int = 20
     return centers, means
 
 
-def plot_learning_curves(runs: dict[str, Sequence[str | Path]], path: str | Path,
+def plot_learning_curves(runs: Mapping[str, Sequence[str | Path]], path: str | Path,
                          title: str = "") -> Path | None:
     """Save one learning curve per kind (mean over its runs); None without matplotlib.
 

@@ -158,7 +158,12 @@ def train(config: RunConfig, out: str | Path, *, progress_bar: bool = False,
     if resume and (out / "model.zip").is_file() and (out / "run.json").is_file():
         return out
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import (
+        BaseCallback,
+        CallbackList,
+        CheckpointCallback,
+        EvalCallback,
+    )
     from stable_baselines3.common.vec_env import VecNormalize
 
     # Small MLP policies run fastest on one thread, and parallel runs then do not
@@ -186,7 +191,7 @@ def train(config: RunConfig, out: str | Path, *, progress_bar: bool = False,
         model = cls(policy, venv, seed=config.seed, verbose=0, device="cpu",
                     tensorboard_log=tensorboard, **settings["algo_kwargs"])
         done = 0
-    callbacks = []
+    callbacks: list[BaseCallback] = []
     if config.checkpoint_freq:
         callbacks.append(CheckpointCallback(max(1, config.checkpoint_freq // n_envs),
                                             str(out / "checkpoints"), name_prefix="model",

@@ -25,7 +25,7 @@ fewer generator calls: the fast path).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -256,7 +256,7 @@ def _native(env_id: str, n: int, estimator: str | None, estimator_kwargs: dict[s
     base = gym.make_vec(env_id, n, vectorization_mode="vector_entry_point",
                         vector_kwargs=None, autoreset_mode=AutoresetMode.SAME_STEP,
                         generators=generators, **env_kwargs)
-    plant = base.unwrapped.plant
+    plant = cast(Any, base.unwrapped).plant
     venv: VectorEnv = base
     if estimator is not None:
         venv = VectorEstimatorObservation(base, estimator, observation=observation,
@@ -304,7 +304,7 @@ def make_single_env(env_id: str, *, estimator: str | None = None,
     steps = env_kwargs.get("max_episode_steps")
     env = gym.make(env_id, **env_kwargs)
     if steps is not None:
-        env.unwrapped.max_episode_steps = int(steps)
+        cast(Any, env.unwrapped).max_episode_steps = int(steps)
     if estimator is not None:
         return wrap_observation(env, estimator, observation=observation,
                                 **dict(estimator_kwargs or {}))
@@ -319,7 +319,7 @@ class _VectorTrueState(gym.vector.VectorWrapper):
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
-        n_x = len(env.unwrapped.plant.state_names)
+        n_x = len(cast(Any, env.unwrapped).plant.state_names)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(n_x,),
                                                        dtype=np.float64)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,

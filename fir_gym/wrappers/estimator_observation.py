@@ -178,7 +178,9 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            return {"estimate": x_hat, "covariance": self.estimator.P[self._triu]}
+            P = self.estimator.P
+            assert P is not None                     # checked: the filter has a covariance
+            return {"estimate": x_hat, "covariance": P[self._triu]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
     def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:

@@ -10,12 +10,15 @@ with; :func:`wrap_observation` does the same for an existing env from one word
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 from gymnasium.envs.registration import load_env_creator
 
 from .baselines import MeasurementObservation, TrueStateObservation
+
+if TYPE_CHECKING:
+    from fir_gym.envs._base import PlantEnv
 from .estimator_observation import EstimatorObservation
 
 
@@ -51,7 +54,7 @@ def make_plant(
     ``"estimate"``) and ``estimator_kwargs``.
     """
     creator = load_env_creator(plant) if isinstance(plant, str) else plant
-    env = creator(**plant_kwargs)
+    env = cast(gym.Env, creator(**plant_kwargs))
     if estimator is None:
         if estimator_kwargs:
             raise ValueError("estimator_kwargs given without an estimator")
@@ -86,7 +89,8 @@ def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
                 raise ValueError(f"{key} is not an option of the native vector env; wrap it in "
                                  "fir_gym.wrappers.VectorEstimatorObservation instead")
             kwargs.pop(key, None)
-        return PlantVectorEnv(load_env_creator(plant), num_envs=num_envs, **kwargs)
+        return PlantVectorEnv(cast("type[PlantEnv]", load_env_creator(plant)),
+                              num_envs=num_envs, **kwargs)
 
     make_vector.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
     return make_vector

@@ -17,7 +17,7 @@ same-step mode ``info["final_obs"]`` becomes the ended episodes' last windows).
 
 from __future__ import annotations
 
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -35,6 +35,10 @@ def _window_space(n_y: int, n_u: int, horizon: int) -> spaces.Box:
     return spaces.Box(-np.inf, np.inf, shape=(horizon * (n_y + n_u),), dtype=np.float64)
 
 
+def _flat_size(space: spaces.Space) -> int:
+    return int(np.prod(space.shape or ()))
+
+
 def _horizon_of(plant: Any, horizon: int | None) -> int:
     if horizon is None:
         return int(getattr(plant, "default_horizon", 10))
@@ -48,8 +52,8 @@ class MeasurementStack(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, horizon=horizon)
         gym.Wrapper.__init__(self, env)
         self.horizon = _horizon_of(env.unwrapped, horizon)
-        self._n_y = int(np.prod(env.observation_space.shape))
-        self._n_u = int(np.prod(env.action_space.shape))
+        self._n_y = _flat_size(env.observation_space)
+        self._n_u = _flat_size(env.action_space)
         self.observation_space = _window_space(self._n_y, self._n_u, self.horizon)
         self._y = np.zeros((self.horizon, self._n_y))
         self._a = np.zeros((self.horizon, self._n_u))
@@ -86,10 +90,10 @@ class VectorMeasurementStack(gym.vector.VectorWrapper):
         self._same_step = mode == AutoresetMode.SAME_STEP
         plant = getattr(env.unwrapped, "plant", None)
         if plant is None:
-            plant = env.unwrapped.get_attr("unwrapped")[0]
+            plant = cast(Any, env.unwrapped).get_attr("unwrapped")[0]
         self.horizon = _horizon_of(plant, horizon)
-        self._n_y = int(np.prod(env.single_observation_space.shape))
-        self._n_u = int(np.prod(env.single_action_space.shape))
+        self._n_y = _flat_size(env.single_observation_space)
+        self._n_u = _flat_size(env.single_action_space)
         self.single_observation_space = _window_space(self._n_y, self._n_u, self.horizon)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         n, K = self.num_envs, self.horizon
@@ -99,7 +103,7 @@ class VectorMeasurementStack(gym.vector.VectorWrapper):
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[FloatArray, dict[str, Any]]:
-        y, info = self.env.reset(seed=seed, options=options)
+        y, info = cast(Any, self.env).reset(seed=seed, options=options)
         self._y[:] = np.asarray(y, dtype=np.float64).reshape(self.num_envs, 1, self._n_y)
         self._a[:] = 0.0
         self._prev_done[:] = False

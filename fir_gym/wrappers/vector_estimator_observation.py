@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -82,7 +82,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        y, info = self.env.reset(seed=seed, options=options)
+        y, info = cast(Any, self.env).reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
         self._prev_done[:] = False
@@ -127,6 +127,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             return x_hat
         if self.observation_kind == "estimate+covariance":
             P = (estimator or self.estimator).P
+            assert P is not None                     # checked: the filter has a covariance
             return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
@@ -155,6 +156,6 @@ def _plant_attr(env: VectorEnv, name: str) -> Any:
     if plant is not None:
         return getattr(plant, name, None)
     try:
-        return base.get_attr(name)[0]                   # sync / async: from sub-env 0
+        return cast(Any, base).get_attr(name)[0]        # sync / async: from sub-env 0
     except AttributeError:
         return None
