@@ -22,11 +22,13 @@ from typing import Any, SupportsFloat, cast
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector import VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from fir_gym.estimators._validation import positive
+
+from .vector_estimator_observation import same_step_mode
 
 FloatArray = NDArray[np.float64]
 
@@ -83,11 +85,7 @@ class VectorMeasurementStack(gym.vector.VectorWrapper):
 
     def __init__(self, env: VectorEnv, horizon: int | None = None) -> None:
         super().__init__(env)
-        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
-        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"VectorMeasurementStack follows next-step or same-step "
-                             f"autoreset; this vector env uses {mode}")
-        self._same_step = mode == AutoresetMode.SAME_STEP
+        self._same_step = same_step_mode(env, type(self).__name__)
         plant = getattr(env.unwrapped, "plant", None)
         if plant is None:
             plant = cast(Any, env.unwrapped).get_attr("unwrapped")[0]

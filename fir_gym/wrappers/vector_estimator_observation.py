@@ -49,11 +49,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     def __init__(self, env: VectorEnv, estimator: type[Estimator] | str,
                  observation: str = "estimate", **options: Any) -> None:
         super().__init__(env)
-        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
-        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"VectorEstimatorObservation follows next-step or same-step "
-                             f"autoreset; this vector env uses {mode}")
-        self._same_step = mode == AutoresetMode.SAME_STEP
+        self._same_step = same_step_mode(env, type(self).__name__)
         one_of("observation", observation, OBSERVATION_KINDS)
         if isinstance(estimator, Estimator):
             raise TypeError("give VectorEstimatorObservation an estimator class or name (it "
@@ -147,6 +143,16 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             np.full(self.num_envs, bool(diverged))
         info["_estimator_diverged"] = everyone
         return info
+
+
+def same_step_mode(env: VectorEnv, wrapper: str) -> bool:
+    """Whether ``env`` autoresets in the same step (else in the next); other modes are a
+    ValueError naming ``wrapper``."""
+    mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+    if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        raise ValueError(f"{wrapper} follows next-step or same-step autoreset; this vector "
+                         f"env uses {mode}")
+    return bool(mode == AutoresetMode.SAME_STEP)
 
 
 def _plant_attr(env: VectorEnv, name: str) -> Any:
