@@ -109,3 +109,11 @@ def test_cli_evaluates_lqg_and_compares(tmp_path, capsys):
     table = (tmp_path / "comparison.md").read_text()
     assert "| true" in table and "| lqg" in table and "IQM" in table
     assert (tmp_path / "learning_curves.png").is_file()
+
+
+def test_tensorboard_logs_are_written(tmp_path):
+    pytest.importorskip("tensorboard")
+    config = RunConfig(env_id="fir_gym/Orbit-v0", observation_kind="true", steps=256, n_envs=2,
+                       env_kwargs=SMALL, tensorboard=str(tmp_path / "tb"))
+    train(config, tmp_path / "run")
+    assert list((tmp_path / "tb").glob("true-seed0_*/events.out.tfevents.*"))
