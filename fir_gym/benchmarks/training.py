@@ -145,7 +145,7 @@ def _train_speed(quick: bool) -> dict[str, Any]:
                            verbose=0, **kwargs)
         models[name].learn(rollout)                     # warm-up: first rollout and update
     best = dict.fromkeys(models, float("inf"))
-    for _ in range(2 if quick else 3):                  # alternating blocks, best of each
+    for _ in range(1 if quick else 3):                  # alternating blocks, best of each
         for name, model in models.items():
             t0 = time.perf_counter()
             model.learn(rollout * rollouts, reset_num_timesteps=False)
