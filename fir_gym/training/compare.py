@@ -64,7 +64,7 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     if job.get("resume") and result_file.is_file():
         saved = json.loads(result_file.read_text())
         if saved.get("config") == json.loads(config.to_json()):
-            return saved
+            return {**saved, "reused": True}
     start = time.perf_counter()
     train(config, out, resume=bool(job.get("resume")))
     trained = time.perf_counter() - start
