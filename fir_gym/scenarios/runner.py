@@ -54,6 +54,7 @@ class Runner:
             return []
         if self.backend == "serial" or (self.backend == "joblib" and self._n_jobs() == 1):
             return [fn(item) for item in self._bar(items, desc)]
+        fn = OneBlasThread(fn)
         if self.backend == "joblib":
             from joblib import Parallel, delayed
 
@@ -113,6 +114,23 @@ class Runner:
         except ImportError:  # tqdm is a dependency; a stripped install just shows no bars
             return iterable
         return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+class OneBlasThread:
+    """``fn`` run with one BLAS thread (as the ``fir-gym`` command runs the client).
+
+    The tasks' matrices are small: a multi-threaded BLAS in each of several worker
+    processes only oversubscribes the cores.
+    """
+
+    def __init__(self, fn: Callable[[Any], Any]) -> None:
+        self.fn = fn
+
+    def __call__(self, item: Any) -> Any:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self.fn(item)
 
 
 def seeded_normals(task: tuple[int, float]) -> Any:
