@@ -42,13 +42,13 @@ from fir_gym.estimators.continuous import ContinuousModel
 from fir_gym.estimators.continuous_fir import STEPS_PER_SECOND, fir_riccati, kalman_bucy
 
 from .plan import Stage, Task, run_plan
-from .prose import join, say
+from .prose import Printed, join, say
 from .report import Report, claim, number_verdict
 from .runner import Runner
 
 #: Table 1 of paper 001 as printed: columns FIR T = 1, 5, 7 and the Kalman filter
-PAPER_TABLE1 = {"dpi1": ("0.0013", "0.0031", "0.0081", "0.0173"),
-                "dpi2": ("0.0143", "0.0250", "0.0369", "0.0480")}
+PAPER_TABLE1 = {"dpi1": tuple(map(Printed, ("0.0013", "0.0031", "0.0081", "0.0173"))),
+                "dpi2": tuple(map(Printed, ("0.0143", "0.0250", "0.0369", "0.0480")))}
 HORIZONS: tuple[float | None, ...] = (1.0, 5.0, 7.0, None)   # None: steady-state Kalman–Bucy
 NOISE_BOX = {"dq": 0.01, "dv": 0.1}
 MODEL_BOX = {"delta22": 0.006, "delta_c": 0.1}
@@ -178,7 +178,6 @@ def _assemble(res: dict[tuple[float | None, str], dict[str, Any]], quick: bool) 
         "Φ(T,τ)": "eq 3.2 integrates the transition to the window's end (eq 3.7)",
         "Φ(τ,0)": "eq 3.2 integrates the transition from the window start (eq 3.3 as printed)",
     }
-    default = READINGS[DEFAULT]
 
     s1 = report.summary("Table 1, Δπ₁ (noise uncertainty, Theorem 3.1)", setup, legend)
     for i, h in enumerate(HORIZONS):

@@ -71,6 +71,30 @@ def execute(plans: Sequence[Any], runner: Runner | None = None, *,
             pending[i] = pending[i].then(results[i])
 
 
+def gather(plans: Sequence[Any], then: Callable[[list[Any]], Any], desc: str = "") -> Any:
+    """One plan that advances ``plans`` side by side, stage by stage, then ``then(values)``.
+
+    A scenario with two experiments of different depths (one stage, two stages) is
+    ``gather([plan_a, plan_b], assemble)``: each stage of the result holds the next
+    tasks of every plan that still has some.
+    """
+    plans = list(plans)
+    open_ = [i for i, p in enumerate(plans) if isinstance(p, Stage)]
+    if not open_:
+        return then(plans)
+    sizes = [len(plans[i].tasks) for i in open_]
+
+    def advance(results: list[Any]) -> Any:
+        nxt, start = list(plans), 0
+        for i, n in zip(open_, sizes, strict=True):
+            nxt[i] = plans[i].then(results[start:start + n])
+            start += n
+        return gather(nxt, then, desc)
+
+    return Stage([t for i in open_ for t in plans[i].tasks], advance,
+                 desc=desc or ", ".join(dict.fromkeys(plans[i].desc for i in open_)))
+
+
 def run_plan(plan: Any, runner: Runner | None = None) -> Any:
     """``execute([plan], runner)[0]``: one scenario on its own."""
     return execute([plan], runner)[0]

@@ -18,7 +18,7 @@ import string
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["Prose", "join", "literal_numbers", "say"]
+__all__ = ["Printed", "Prose", "join", "literal_numbers", "say"]
 
 #: a reference to a numbered part of a paper (its digits are not results)
 _REFERENCE = re.compile(
@@ -47,6 +47,12 @@ class Prose(str):
         return (Prose, (self.template, self.values))
 
 
+class Printed(str):
+    """A number as a paper prints it (``"0.0250"``): an input, never a result of ours."""
+
+    __slots__ = ()
+
+
 def say(template: str, /, **values: Any) -> Prose:
     """``template.format(**values)``, remembering both (numbers come in as ``values``)."""
     return Prose(template, values)
@@ -58,7 +64,7 @@ def join(parts: Iterable[str], sep: str = ", ") -> Prose:
     if _DIGITS.search(sep):
         raise ValueError(f"a separator carries no number; got {sep!r}")
     template = sep.replace("{", "{{").replace("}", "}}").join(
-        "{p%d}" % i for i in range(len(parts)))
+        f"{{p{i}}}" for i in range(len(parts)))
     return Prose(template, {f"p{i}": p for i, p in enumerate(parts)})
 
 
@@ -66,9 +72,12 @@ def literal_numbers(text: Any) -> list[str]:
     """The numbers ``text`` carries that were typed in rather than formatted from a value.
 
     For a :class:`Prose`, the literal parts of its template are checked, and every
-    string value it formats, recursively; a plain string is checked whole; anything
-    else (a number formatted into a template) carries none.
+    string value it formats, recursively; a plain string is checked whole; a
+    :class:`Printed` number (the paper's) and anything else (a number formatted into a
+    template) carry none.
     """
+    if isinstance(text, Printed):
+        return []
     if isinstance(text, Prose):
         found = []
         for literal, *_ in string.Formatter().parse(text.template):

@@ -86,13 +86,27 @@ def agrees(paper: float | str, ours: float, *, se: float | None = None,
     return gap <= max(rel * abs(p), 2.0 * float(se), half)
 
 
+def excluded_by(paper: float | str, floor: float, rel: float = REL_TOL) -> bool:
+    """Whether a lower bound ``floor`` on the expected value excludes the paper's number.
+
+    The paper's figure is itself an estimate, so it must lie below the floor by more
+    than ``rel``.
+    """
+    return float(paper) < floor / (1.0 + rel)
+
+
 def number_verdict(paper: float | str, ours: float, *, se: float | None = None,
-                   reading: str | None = None, otherwise: str = "differs") -> str:
+                   reading: str | None = None, otherwise: str = "differs",
+                   floor: float | None = None) -> str:
     """The verdict of one number: reproduced (under ``reading``), or ``not reproduced: otherwise``.
 
     ``otherwise`` is ``"bound"``, ``"ambiguous"`` or ``"differs"`` — the reason the
-    caller has established for a disagreement.
+    caller has established for a disagreement. A lower bound ``floor`` that excludes the
+    paper's number (:func:`excluded_by`) makes it ``"not reproduced: bound"`` whatever
+    our estimate: a Monte Carlo figure near the paper's would then be scatter.
     """
+    if floor is not None and excluded_by(paper, floor):
+        return "not reproduced: bound"
     if agrees(paper, ours, se=se):
         return reproduced(reading)
     verdict = f"not reproduced: {otherwise}"
