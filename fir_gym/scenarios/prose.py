@@ -79,9 +79,9 @@ def literal_numbers(text: Any) -> list[str]:
     if isinstance(text, Printed):
         return []
     if isinstance(text, Prose):
-        found = []
-        for literal, *_ in string.Formatter().parse(text.template):
-            found += _numbers_in(literal)
+        skeleton = "".join(literal + ("\0" if field is not None else "")
+                           for literal, field, *_ in string.Formatter().parse(text.template))
+        found = _numbers_in(skeleton)
         for value in text.values.values():
             found += literal_numbers(value)
         return found
