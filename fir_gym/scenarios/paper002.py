@@ -220,7 +220,7 @@ def _assemble(scores: dict[str, dict[str, Any]], counts: dict[str, Any], n_runs:
                   say("{a:.3g} vs {b:.3g} (ratio {r:.3f})", a=bpf["total"], b=ekf["total"],
                       r=ratio_t), reading, "beyond the paper",
                   say("the paper compares with nothing; paired per-run difference {m:+.3f} ± "
-                      "{s:.3f} (1 s.e.); the project's criterion ratio ≤ {lim:g} is {met}",
+                      "{s:.3f} (one s.e.); the project's criterion ratio ≤ {lim:g} is {met}",
                       m=mean, s=se, lim=RMSE_RATIO_LIMIT,
                       met="met" if ratio_t <= RMSE_RATIO_LIMIT else "NOT met"))
         c = counts[reading]

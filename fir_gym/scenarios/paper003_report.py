@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 
 from .paper003 import (
-    CELLS,
     CLAIM_SHARE,
     CONVERGED_BY,
     DEFAULT,
@@ -100,17 +99,17 @@ def scores(parts: list[dict[str, Any]], cell: Cell) -> dict[str, Any]:
 def assemble(merged: dict[tuple[str, Cell], list[Any]], n_main: int, n_sweep: int,
              quick: bool) -> Report:
     """The report from every cell's chunks."""
-    named = {name: scores(merged[(name, c)], c) for name, c in CELLS.items()}
+    named = {name: scores(parts, c) for (name, c), parts in merged.items() if name != "sweep"}
     swept = {c: scores(parts, c) for (name, c), parts in merged.items() if name == "sweep"}
     report = Report("003", "UKF state and parameter estimation of a pendulum-slider")
-    env = make_env(CELLS[DEFAULT])
+    env = make_env(named[DEFAULT]["cell"])
     sigma = np.sqrt(np.diag(env.params["R"]))
     q = float(np.asarray(env.model.Q)[0, 0])
     env.close()
     setup = say("PendulumSlider-v0, the paper's friction term, R = diag([{r}]²), Q = {q:g} I, "
                 "P0 = I6, UKF and EKF from zero; {M} runs per named cell, {S} per sweep cell",
                 r=join([say("{v:g}", v=v) for v in sigma]), q=q, M=n_main, S=n_sweep)
-    legend = {name: _describe(c) for name, c in CELLS.items()}
+    legend = {name: _describe(sc["cell"]) for name, sc in named.items()}
     _table4(report, named, swept, setup, legend, sigma)
     _table5(report, named, swept, setup, legend)
     _claims(report, named, setup, legend)
@@ -322,7 +321,7 @@ def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> Non
                       / float(PAPER_TABLE5["UKF"]["M0"])) for n, sc in named.items()}
     lsm_m0 = {n: None if sc["lsm"] is None else float(sc["lsm"]["backward"][:, m0].mean())
               for n, sc in named.items()}
-    E_paper = energy_for_bias(float(PAPER_TABLE5["LSM"]["M0"]), CELLS[DEFAULT])
+    E_paper = energy_for_bias(float(PAPER_TABLE5["LSM"]["M0"]), q["cell"])
     spread = float(np.std(q["ukf"]["half"][:, m0]) / TRUE["M0"])
     n4 = sum(agrees(PAPER_TABLE4[s][0], v, se=e) for sc in swept.values()
              for sg in SCORINGS for s, v, e in zip(STATES, *sc["ukf"][("state", sg[0])],
