@@ -102,12 +102,12 @@ def plan(seed: int, quick: bool, runs: int | None) -> Stage:
     """Stage 1: one episode per run; stage 2: one task per filter on all of them."""
     steps, runs = STEPS[quick], runs or RUNS[quick]
     episodes = [Task(simulate_episode, EpisodeTask(ENV_ID, task_seed(seed, 0, i), steps),
-                     cost=2.6e-5 * steps) for i in range(runs)]
+                     cost=1.3e-5 * steps) for i in range(runs)]
 
     def filters(results: list[Any]) -> Stage:
         ep = stack_episodes(results)
         tasks = [Task(filter_task, (name, ep.X, ep.Y, ep.U),
-                      cost=(1.5e-3 if name == "EKF" else 4e-3) * steps * (1 + runs / 30))
+                      cost=(1e-6 if name == "EKF" else 3e-6) * steps * runs)
                  for name in FILTERS]
         return Stage(tasks, lambda out: _collect(ep.X, steps, runs, out), desc="paper 000")
 

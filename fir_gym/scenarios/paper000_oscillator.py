@@ -221,7 +221,7 @@ def tasks(seed: int, quick: bool, runs: int | None) -> tuple[list[Any], list[Tas
     for u, g, r in READINGS:
         keys.append((u, g, r))
         out.append(Task(filter_group, (u, g, r, seed, runs, steps),
-                        cost=(6 if g == "Gp" else 5) * 0.004 * runs * steps / 100))
+                        cost=(6 if g == "Gp" else 5) * 1.7e-6 * runs * steps))
     for r in R_READINGS:
         for form in FORMS:
             keys.append(("floor", r, form))

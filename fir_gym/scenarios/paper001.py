@@ -124,7 +124,7 @@ def column(task: tuple[float | None, str, str, int | None]) -> dict[str, Any]:
 
 def _cost(h: float | None, part: str, quick: bool) -> float:
     length = 3.0 if h is None else h
-    return (0.05 if quick else 0.3) * (1.0 + length) * (1.5 if part == "model" else 1.0)
+    return (0.02 if quick else 0.1) * (1.0 + length) * (1.5 if part == "model" else 1.0)
 
 
 def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:

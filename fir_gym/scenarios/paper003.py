@@ -210,60 +210,103 @@ def settle_index(err: np.ndarray, within: float = WITHIN) -> np.ndarray:
     return np.where(outside.any(axis=0), last + 1, 0).astype(int)
 
 
-def cell_task(task: tuple[Cell, int, int, int, bool]) -> dict[str, Any]:
-    """One chunk of a cell: ``n`` episodes from seed ``seed`` on, the filters, the LSM; a
-    runner task. ``with_ekf`` adds the EKF and the run-0 series (the named cells)."""
-    cell, seed, chunk, n, with_ekf = task
+def runs_for(cell: Cell, runs: int) -> int:
+    """The runs of a cell: ``runs`` per second-long cell, fewer for longer ones (the same number
+    of samples; at least two, for a spread)."""
+    return max(2, round(runs / cell.seconds))
+
+
+def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[str, Any]]:
+    """One chunk of one or more cells of the same duration and equations, batched through one
+    filter; per cell its per-run sums (a runner task).
+
+    ``task = (cells, seed, chunk, n, with_ekf)``: ``n`` episodes per cell from seed
+    ``seed + chunk·CHUNK`` on, the UKF (and with ``with_ekf`` the EKF and run 0's series)
+    on all of them at once, the LSM per run.
+    """
+    cells, seed, chunk, n, with_ekf = task
     seeds = range(seed + chunk * CHUNK, seed + chunk * CHUNK + n)
-    ep = _episodes([episode((s, cell.seconds, cell)) for s in seeds], cell, cell.steps)
+    parts = [_episodes([episode((s, c.seconds, c)) for s in seeds], c, c.steps) for c in cells]
+    ep = replace_episodes(parts)
     truth = np.array([TRUE[p] for p in PARAMS])
     t = DT * np.arange(ep.X.shape[0])
-    out: dict[str, Any] = {"n": n, "meas_sse": np.nansum((ep.Y - ep.X) ** 2, axis=0),
-                           "samples": np.isfinite(ep.Y[..., 0]).sum(axis=0),
-                           "rate_ms": float(np.nanmean(ep.X[1:, :, 3] ** 2)),
-                           "lsm": {d: lsm_estimates(ep, d) for d in DIFFERENCES}
-                           if np.isfinite(ep.Y).all() else None}
-    for method in ("ukf", "ekf") if with_ekf else ("ukf",):
-        est = joint_estimates(ep, method)
-        err = est[..., 4:] - truth
-        r: dict[str, Any] = {}
-        for t4, t5 in {(cell.t4, cell.t5), *SCORINGS}:
-            s4, s5 = t >= t4 - DT / 2, t >= t5 - DT / 2
-            r[("state", t4)] = np.nansum((est[s4, :, :4] - ep.X[s4]) ** 2, axis=0)
-            r[("n", t4)] = np.isfinite(ep.X[s4, :, 0]).sum(axis=0)
-            r[("param", t5)] = np.nansum(err[s5] ** 2, axis=0)
-            r[("n", t5)] = np.isfinite(err[s5, :, 0]).sum(axis=0)
-        r.update({"end": err[-1], "half": est[min(round(HALF / DT), len(est) - 1), :, 4:],
-                  "settle": settle_index(err), "sum": np.nansum(err, axis=1),
-                  "sumsq": np.nansum(err ** 2, axis=1)})
-        if chunk == 0:
-            r["run0"] = est[:, 0]
-        out[method] = r
-    if chunk == 0:
-        out["series"] = {"X": ep.X[:, 0], "Y": ep.Y[:, 0]}
+    est = {m: joint_estimates(ep, m) for m in (("ukf", "ekf") if with_ekf else ("ukf",))}
+    out = []
+    for i, (cell, part) in enumerate(zip(cells, parts, strict=True)):
+        runs = slice(i * n, (i + 1) * n)
+        X, Y = ep.X[:, runs], ep.Y[:, runs]
+        res: dict[str, Any] = {"n": n, "meas_sse": np.nansum((Y - X) ** 2, axis=0),
+                               "samples": np.isfinite(Y[..., 0]).sum(axis=0),
+                               "rate_ms": float(np.nanmean(X[1:, :, 3] ** 2)),
+                               "lsm": {d: lsm_estimates(part, d) for d in DIFFERENCES}
+                               if np.isfinite(Y).all() else None}
+        for method, e_all in est.items():
+            e = e_all[:, runs]
+            err = e[..., 4:] - truth
+            r: dict[str, Any] = {}
+            for t4, t5 in {(cell.t4, cell.t5), *SCORINGS}:
+                s4, s5 = t >= t4 - DT / 2, t >= t5 - DT / 2
+                r[("state", t4)] = np.nansum((e[s4, :, :4] - X[s4]) ** 2, axis=0)
+                r[("n", t4)] = np.isfinite(X[s4, :, 0]).sum(axis=0)
+                r[("param", t5)] = np.nansum(err[s5] ** 2, axis=0)
+                r[("n", t5)] = np.isfinite(err[s5, :, 0]).sum(axis=0)
+            r.update({"end": err[-1], "half": e[min(round(HALF / DT), len(e) - 1), :, 4:],
+                      "settle": settle_index(err), "sum": np.nansum(err, axis=1),
+                      "sumsq": np.nansum(err ** 2, axis=1)})
+            if chunk == 0 and with_ekf:
+                r["run0"] = e[:, 0]
+            res[method] = r
+        if chunk == 0 and with_ekf:
+            res["series"] = {"X": X[:, 0], "Y": Y[:, 0]}
+        out.append(res)
     return out
 
 
+def replace_episodes(parts: list[Episodes]) -> Episodes:
+    """Episodes of several cells side by side (same duration and model): one batch."""
+    first = parts[0]
+    return Episodes(np.concatenate([p.Y for p in parts], axis=1),
+                    np.concatenate([p.X for p in parts], axis=1),
+                    np.concatenate([p.actions for p in parts], axis=1), first.force_max,
+                    first.model, first.dynamics)
+
+
+#: the named cells run beside the UKF with the EKF (and give the figures' series)
+WITH_EKF = ("quiet", "lively")
+#: sweep cells batched through one filter per task
+SWEEP_GROUP = 4
+
+
 def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:
-    """Named cells (:data:`CELLS`, ``runs`` each) and the sweep (:data:`SWEEP_RUNS` each)."""
+    """Named cells (:data:`CELLS`, ``runs`` per second) and the sweep (:data:`SWEEP_RUNS`)."""
     n_main = runs or RUNS[quick]
     n_sweep = min(n_main, SWEEP_RUNS[quick])
-    jobs: list[tuple[str, Cell, int]] = [(name, c, n_main) for name, c in CELLS.items()]
-    jobs += [("sweep", c, n_sweep) for c in sweep(quick)]
+    jobs: list[tuple[tuple[str, ...], tuple[Cell, ...], int]] = [
+        ((name,), (c,), runs_for(c, n_main)) for name, c in CELLS.items()]
+    by_length: dict[float, list[Cell]] = {}
+    for c in sweep(quick):
+        by_length.setdefault(c.seconds, []).append(c)
+    for length, group in by_length.items():
+        for k in range(0, len(group), SWEEP_GROUP):
+            cells = tuple(group[k:k + SWEEP_GROUP])
+            jobs.append((("sweep",) * len(cells), cells, runs_for(cells[0], n_sweep)))
     keys, tasks = [], []
-    for name, c, n in jobs:
+    for names, cells, n in jobs:
+        with_ekf = names[0] in WITH_EKF
         for i, size in enumerate(chunks(n, CHUNK)):
-            keys.append((name, c))
-            cost = size * c.seconds * (0.03 if c.dynamics == "physical" else 0.06) + \
-                c.seconds * (0.3 if name != "sweep" else 0.15)
-            tasks.append(Task(cell_task, (c, seed, i, size, name != "sweep"), cost=cost))
+            keys.append(list(zip(names, cells, strict=True)))
+            sim = size * len(cells) * cells[0].seconds * (
+                0.04 if cells[0].dynamics == "physical" else 0.06)
+            cost = sim + cells[0].seconds * (0.3 if with_ekf else 0.2)
+            tasks.append(Task(cell_task, (cells, seed, i, size, with_ekf), cost=cost))
 
     def then(results: list[Any]) -> Report:
         from .paper003_report import assemble
 
         merged: dict[tuple[str, Cell], list[Any]] = {}
         for key, res in zip(keys, results, strict=True):
-            merged.setdefault(key, []).append(res)
+            for name_cell, part in zip(key, res, strict=True):
+                merged.setdefault(name_cell, []).append(part)
         return assemble(merged, n_main, n_sweep, quick)
 
     return Stage(tasks, then, desc="paper 003")

@@ -106,9 +106,12 @@ def assemble(merged: dict[tuple[str, Cell], list[Any]], n_main: int, n_sweep: in
     sigma = np.sqrt(np.diag(env.params["R"]))
     q = float(np.asarray(env.model.Q)[0, 0])
     env.close()
+    runs = {sc["cell"].seconds: sc["runs"] for sc in named.values()}
     setup = say("PendulumSlider-v0, the paper's friction term, R = diag([{r}]²), Q = {q:g} I, "
-                "P0 = I6, UKF and EKF from zero; {M} runs per named cell, {S} per sweep cell",
-                r=join([say("{v:g}", v=v) for v in sigma]), q=q, M=n_main, S=n_sweep)
+                "P0 = I6, the UKF (and on {ekf} the EKF) from zero; runs per named cell: {n}",
+                r=join([say("{v:g}", v=v) for v in sigma]), q=q,
+                ekf=join([n for n in named if "ekf" in named[n]], " and "),
+                n=join([say("{m} for {t:g} s", m=m, t=t) for t, m in sorted(runs.items())]))
     legend = {name: _describe(sc["cell"]) for name, sc in named.items()}
     _table4(report, named, swept, setup, legend, sigma)
     _table5(report, named, swept, setup, legend)
@@ -308,10 +311,13 @@ def _sweep_table(report: Report, swept: dict[Cell, dict[str, Any]]) -> None:
         ["A (N)", "f (Hz)", "θ₀", "T (s)", "from (s)", *STATES, "μ UKF", "M0 UKF", "μ LSM",
          "M0 LSM", say("% in {p:.0f} %", p=100 * WITHIN), say("% by {t:g} s", t=CONVERGED_BY)],
         [paper, *rows],
-        setup=say("physical equations, `U = A sin(2πft)` N from `[x_rest, 0, θ₀, 0]`; 'from': the "
+        setup=say("physical equations, `U = A sin(2πft)` N from `[x_rest, 0, θ₀, 0]`, {r} runs per "
+                  "cell (by duration); 'from': the "
                   "start of the Table 4 / Table 5 windows; UKF RMSEs and the backward LSM's mean "
                   "errors; the last two columns: runs within {p:.0f} % at the end, and from "
-                  "{t:g} s on", p=100 * WITHIN, t=CONVERGED_BY))
+                  "{t:g} s on", p=100 * WITHIN, t=CONVERGED_BY,
+                  r=join([say("{m} ({t:g} s)", m=m, t=t) for t, m in sorted(
+                      {c.seconds: sc["runs"] for c, sc in swept.items()}.items())], ", ")))
 
 
 def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> None:

@@ -80,7 +80,7 @@ def comparison_plan(seed: int, quick: bool, runs: int | None) -> Stage:
     sizes = chunks(runs, CHUNK)
     keys = [(corner, n) for corner in CORNERS for n in sizes]
     tasks = [Task(comparison_task, (corner, seed, i, n, windows),
-                  cost=4e-4 * n * (1 + 2 * len(windows)))
+                  cost=1e-3 * n * (1 + 2 * len(windows)))
              for corner in CORNERS for i, n in enumerate(sizes)]
 
     def then(results: list[Any]) -> dict[str, Any]:

@@ -117,10 +117,10 @@ def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:
     K, M = ORBIT_STEPS[quick], runs or ORBIT_RUNS[quick]
     deltas = DELTAS[quick]
     orbit_tasks = [Task(simulate_episode, EpisodeTask(ORBIT_ID, task_seed(seed, 6, i), K),
-                        cost=2.6e-5 * K) for i in range(M)]
+                        cost=1.3e-5 * K) for i in range(M)]
     rec_tasks = [Task(recovery_cell, (d, seed, runs or OSC_RUNS[quick], OSC_STEPS[quick],
                                       OSC_WINDOWS[quick]),
-                      cost=1e-4 * (runs or OSC_RUNS[quick]) * OSC_STEPS[quick] / 10)
+                      cost=1.8e-5 * (runs or OSC_RUNS[quick]) * OSC_STEPS[quick])
                  for d in deltas]
 
     def grid(results: list[Any]) -> Stage:
