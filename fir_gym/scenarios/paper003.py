@@ -251,6 +251,7 @@ def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[s
                 r[("param", t5)] = np.nansum(err[s5] ** 2, axis=0)
                 r[("n", t5)] = np.isfinite(err[s5, :, 0]).sum(axis=0)
             r.update({"end": err[-1], "half": e[min(round(HALF / DT), len(e) - 1), :, 4:],
+                      "at_converged": err[min(round(CONVERGED_BY / DT), len(e) - 1)],
                       "settle": settle_index(err), "sum": np.nansum(err, axis=1),
                       "sumsq": np.nansum(err ** 2, axis=1)})
             if chunk == 0 and with_ekf:
