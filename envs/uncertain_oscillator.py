@@ -243,6 +243,14 @@ class UncertainOscillatorEnv(PlantEnv):
         if delta:
             canvas.rect(2.0, 0.6, 2.0 + min(abs(delta), 1.0) * 2.0, 0.75, _draw.BLUE)
 
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The centre of the mass at position ``x1`` (the rectangle :meth:`_draw` draws)."""
+        return np.array([[float(x[0]), -0.1]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured position ``x1``."""
+        return [(np.array([float(y[0]), -0.1]), None)]
+
 
 Window = tuple[int, int, float]
 
