@@ -25,6 +25,11 @@ class does what must be identical everywhere:
   they are "probably too low/high" — the warning is expected.
   ``info["state"]`` is a fresh copy of the true state ``x[k]``.
 * **Reset options.** ``reset(options={"state": x0})`` starts from a given state.
+* **Frames.** ``render()`` (``render_mode="rgb_array"``) draws the true state and
+  remembers the frame's view, so that :meth:`~fir_gym.envs._overlay.EstimateDrawing.draw_estimate`
+  can draw an estimate, its 2σ region and the measurement over it in the plant's own
+  coordinates (:mod:`fir_gym.envs._overlay`; each plant's ``_picture`` says where a
+  state puts its drawing).
 """
 
 from __future__ import annotations
@@ -41,10 +46,12 @@ from numpy.typing import ArrayLike, NDArray
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import as_covariance, as_vector
 
+from ._overlay import EstimateDrawing
+
 FloatArray = NDArray[np.float64]
 
 
-class PlantEnv(gym.Env[FloatArray, FloatArray]):
+class PlantEnv(EstimateDrawing, gym.Env[FloatArray, FloatArray]):
     """Base class of the paper plants; see the module docstring for the shared rules."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -224,6 +231,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
 
         canvas = Canvas(400, 300)
         self._draw(canvas)
+        self._frame_view = self._plane_view(canvas)
         return canvas.image
 
     # ------------------------------------------------------------------ helpers

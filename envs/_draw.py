@@ -20,6 +20,10 @@ ACCENT: Color = (210, 85, 45)
 BLUE: Color = (45, 105, 190)
 GREEN: Color = (60, 150, 80)
 GREY: Color = (170, 170, 175)
+#: the estimate drawn over a plant's frame (a colour no plant uses)
+ESTIMATE: Color = (175, 40, 170)
+#: the measurement drawn over a plant's frame
+MEASUREMENT: Color = (0, 140, 130)
 
 
 class Canvas:
@@ -120,6 +124,42 @@ class Canvas:
             x_at = xa + (py - ya) * (xb - xa) / (yb - ya)
             inside ^= crosses & (px < x_at)
         self.image[r0:r1, c0:c1][inside] = color
+
+
+    # ---------------------------------------------------------------- frames and text
+    @classmethod
+    def over(cls, image: NDArray[np.uint8]) -> Canvas:
+        """A canvas that draws onto ``image`` (``(height, width, 3)`` uint8, changed in place).
+
+        Its view is the default one: world ``(x, y)`` is pixel column ``x``, and row
+        ``height - y`` (y up from the bottom edge).
+        """
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"image must be an (height, width, 3) uint8 array; got "
+                             f"{image.dtype} of shape {image.shape}")
+        canvas = cls(image.shape[1], image.shape[0])
+        canvas.image = image
+        return canvas
+
+    @property
+    def view(self) -> tuple[float, tuple[float, float]]:
+        """The world-to-pixel map as ``(scale, (column offset, row offset))``:
+        pixel ``(offset[0] + x scale, offset[1] - y scale)`` (see :meth:`to_pixels`)."""
+        return self._scale, self._offset
+
+    def text(self, column: float, row: float, text: str, color: Color, scale: int = 1) -> None:
+        """One line of ``text`` in the 5 × 9 bitmap font (:mod:`fir_gym.envs._font`), its
+        top-left corner at pixel ``(column, row)``; ``scale`` pixels per font pixel."""
+        from ._font import text_mask
+
+        mask = text_mask(text)
+        if scale != 1:
+            mask = mask.repeat(scale, axis=0).repeat(scale, axis=1)
+        c, r = round(column), round(row)
+        c0, r0 = max(c, 0), max(r, 0)
+        c1, r1 = min(c + mask.shape[1], self.width), min(r + mask.shape[0], self.height)
+        if c0 < c1 and r0 < r1:
+            self.image[r0:r1, c0:c1][mask[r0 - r:r1 - r, c0 - c:c1 - c]] = color
 
 
 def _span(lo: float, hi: float, limit: int) -> tuple[int, int]:

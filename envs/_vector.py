@@ -14,12 +14,18 @@ actions after clipping) and each plant's per-step extras, each with Gymnasium's
 ``_key`` mask. The plant's noise is drawn from the vector env's own generator, so a
 seed gives bit-identical rollouts (but not the same numbers as ``num_envs``
 separate envs, whose generators differ).
+
+With ``render_mode="rgb_array"`` (``gym.make_vec(id, n, vectorization_mode=
+"vector_entry_point", render_mode="rgb_array")``), ``render()`` returns one frame per
+sub-environment, a tuple as Gymnasium's ``SyncVectorEnv`` does, and
+:attr:`PlantVectorEnv.frame_views` the view of each (for drawing estimates over them).
 """
 
 from __future__ import annotations
 
 from typing import Any, ClassVar
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -33,7 +39,7 @@ FloatArray = NDArray[np.float64]
 class PlantVectorEnv(VectorEnv):
     """``num_envs`` copies of ``plant_class(**kwargs)`` stepped as one batch."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": [],
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"],
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(
@@ -50,13 +56,17 @@ class PlantVectorEnv(VectorEnv):
         if max_episode_steps is not None and max_episode_steps <= 0:
             raise ValueError(
                 f"max_episode_steps must be positive or None; got {max_episode_steps!r}")
-        if render_mode is not None:
-            raise ValueError("the native vector envs do not render; use "
-                             "gym.make_vec(..., vectorization_mode='sync') for frames")
-        self.plant = plant_class(**plant_kwargs)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array' for a native vector env; "
+                             f"got {render_mode!r}")
+        self.plant = plant_class(render_mode=render_mode, **plant_kwargs)
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
-        self.render_mode = None
+        self.render_mode = render_mode
+        # the plant's frame rate (instance metadata, as Gymnasium's wrappers set theirs)
+        self.metadata = {**type(self).metadata,  # type: ignore[misc]
+                         "render_fps": self.plant.metadata.get("render_fps", 30)}
+        self._frame_views: tuple[Any, ...] = ()
         self.single_action_space = self.plant.action_space
         self.single_observation_space = self.plant.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -114,6 +124,35 @@ class PlantVectorEnv(VectorEnv):
         info.update({key: np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
                      for key, v in extra.items()})
         return obs, reward, terminated, truncated, self._info(info)
+
+    def render(self) -> tuple[NDArray[np.uint8], ...] | None:
+        """One ``rgb_array`` frame per sub-environment (the plant's drawing of its state)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass "
+                            "render_mode='rgb_array' to gym.make_vec")
+            return None
+        plant = self.plant
+        kept = plant.state, plant.time_step, plant._last_extra
+        frames: list[NDArray[np.uint8]] = []
+        views = []
+        try:
+            for i in range(self.num_envs):
+                plant.state, plant.time_step, plant._last_extra = self.states[i], \
+                    int(self.steps[i]), {}
+                frame = plant.render()
+                assert frame is not None                # the plant has render_mode rgb_array
+                frames.append(frame)
+                views.append(plant.frame_view)
+        finally:
+            plant.state, plant.time_step, plant._last_extra = kept
+        self._frame_views = tuple(views)
+        return tuple(frames)
+
+    @property
+    def frame_views(self) -> tuple[Any, ...]:
+        """The view of each frame the last :meth:`render` returned (see
+        :class:`fir_gym.envs._overlay.FrameView`)."""
+        return self._frame_views
 
     def _check_actions(self, actions: ArrayLike) -> FloatArray:
         shape = self.action_space.shape

@@ -238,3 +238,11 @@ class OrbitEnv(PlantEnv):
         canvas.line(0.0, 0.0, 0.0, r, _draw.GREY, width=1.0)
         canvas.circle(0.0, r, 0.02 * extent + 0.1, _draw.ACCENT)
 
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The body at radius ``r`` on the vertical line (what :meth:`_draw` draws)."""
+        return np.array([[0.0, float(x[0])]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured radius, on the same line."""
+        return [(np.array([0.0, float(y[0])]), None)]
+

@@ -15,6 +15,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, po
 
 from . import _mujoco_passive
 from ._base import PlantEnv, psd_sqrt
+from ._overlay import CameraView
 from .pendulum_slider_dynamics import (
     EQUATIONS,
     FRICTION_MODES,
@@ -32,7 +33,7 @@ RAIL_SOLIMP = (0.99, 0.9999, 0.0001, 0.5, 2.0)
 class PaperFrictionForce:
     """Paper 003's sign-free friction term, solved exactly at every RK4 stage.
 
-    Eq (15) (with the errata of PAPERS.md) adds to the slider the force
+    Eq (15) (with the errata of docs/papers.md#003-eq-15) adds to the slider the force
     ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
     force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
     ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``
@@ -221,6 +222,8 @@ class PendulumSliderEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     #: default FIR window (20 ms at 1 kHz)
     default_horizon: ClassVar[int] = 20
+    #: the slider's colour in the MJCF (the legend's "truth")
+    truth_color: ClassVar[tuple[int, int, int]] = (209, 84, 46)
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
 
     def __init__(
@@ -441,7 +444,34 @@ class PendulumSliderEnv(PlantEnv):
                     "without a display set MUJOCO_GL=egl (or osmesa) before importing mujoco"
                 ) from err
         self._renderer.update_scene(self.mj_data, camera="side")
-        return self._renderer.render()
+        frame = self._renderer.render()
+        self._frame_view = self._camera_view()
+        return frame
+
+    def _camera_view(self) -> CameraView:
+        """The "side" camera as the frame just rendered sees the world."""
+        m, d = self.mj_model, self.mj_data
+        cam = m.camera("side").id
+        (px, py, pz), axes = d.cam_xpos[cam].tolist(), d.cam_xmat[cam].reshape(3, 3).T
+        right, up, back = (tuple(row) for row in axes.tolist())  # rows of the transpose
+        return CameraView(self.width, self.height, int(self.time_step), self._sample_period(),
+                          (px, py, pz), (right, up, back), float(m.cam_fovy[cam]))
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The slider's and the bob's centres in MuJoCo's world (the bodies it draws).
+
+        The slider sits at ``(x, 0, z)`` (``z`` is 0, or its resting height on the rail
+        in the "coulomb" mode); the hinge about +y turns the bob's ``(0, 0, −L)`` into
+        ``(−L sin θ, 0, −L cos θ)`` (``L``: the bob geom's distance, 0.2 m).
+        """
+        z = self._z_rest or 0.0
+        L = -float(self.mj_model.geom("bob").pos[2])
+        p, th = float(x[0]), float(x[2])
+        return np.array([[p, 0.0, z], [p - L * math.sin(th), 0.0, z - L * math.cos(th)]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured slider position and angle place both bodies."""
+        return [(point, None) for point in self._picture(y)]
 
     def close(self) -> None:
         if self._renderer is not None:

@@ -25,7 +25,7 @@ class OscillatorDynamics(FirstStateMeasured):
     ``b = 12`` (so ``x1`` settles at ``b / c = 0.48``; ``x3`` is a constant damping
     parameter, ω = 5). ``D_k = diag(1 + δ_k, 1 + δ_k, 1)``.
 
-    Two readings of eq (29) (PAPERS.md, paper 000, sim 2):
+    Two readings of eq (29) (docs/papers.md#000-eq-29-readings):
 
     * ``"state"`` (the printed one): ``x⁺ = D x + r(x) Δ`` — the uncertainty scales
       the state itself, so the truth grows about 12.6 % per step while δ = 0.15;
@@ -242,6 +242,14 @@ class UncertainOscillatorEnv(PlantEnv):
         delta = self.delta(self.time_step)
         if delta:
             canvas.rect(2.0, 0.6, 2.0 + min(abs(delta), 1.0) * 2.0, 0.75, _draw.BLUE)
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The centre of the mass at position ``x1`` (the rectangle :meth:`_draw` draws)."""
+        return np.array([[float(x[0]), -0.1]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured position ``x1``."""
+        return [(np.array([float(y[0]), -0.1]), None)]
 
 
 Window = tuple[int, int, float]

@@ -364,6 +364,14 @@ class VanDerPolEnv(PlantEnv):
             canvas.polyline(trail[:, 0], trail[:, 1], _draw.BLUE, width=1.5)
         canvas.circle(float(self.state[0]), float(self.state[1]), 0.03 * extent, _draw.ACCENT)
 
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The phase point ``(x1, x2)``."""
+        return np.array([[float(x[0]), float(x[1])]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured ``x1`` (an interval average) leaves ``x2`` open: a vertical line."""
+        return [(np.array([float(y[0]), 0.0]), np.array([0.0, 1.0]))]
+
 
 def van_der_pol_continuous_model(params: Mapping[str, Any]) -> ContinuousModel:
     """VanDerPol-v0's continuous model from its parameters (``epsilon, u_max, Q, R, h``).

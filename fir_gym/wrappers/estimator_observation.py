@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from fir_gym.estimators import Estimator, estimator_class
+from fir_gym.estimators import Estimator, estimator_class, estimator_names
 from fir_gym.estimators._validation import one_of
 
 OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
@@ -89,6 +89,16 @@ def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.f
     return x0, np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
 
 
+def estimator_label(estimator: Estimator) -> str:
+    """How frames and legends name ``estimator``: its registry name in capitals (``"EKF"``),
+    else its class name."""
+    cls = type(estimator)
+    for name in estimator_names():
+        if estimator_class(name) is cls:
+            return name.upper()
+    return cls.__name__
+
+
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
     """The plant's initial-state mean and covariance (floored to stay positive definite)."""
     plant = env.unwrapped
@@ -97,7 +107,7 @@ def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.
 
 
 class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
-    """Replace the measurement observation by a state estimate (ARCHITECTURE.md, data flow).
+    """Replace the measurement observation by a state estimate (docs/architecture.md#data-flow).
 
     Args:
         env: a plant whose ``env.unwrapped.model`` is a
@@ -122,6 +132,13 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``estimator_diverged`` and ``estimator_info`` (the filter's ``last_info``). A
     filter that diverges keeps returning its last finite estimate and says so;
     the observation is never NaN.
+
+    ``render()`` (with ``render_mode="rgb_array"``, or ``"rgb_array_list"`` through
+    ``gym.make``) draws, over the plant's frame, the estimate as magenta rings where it
+    puts the plant's bodies, its 2σ region where the filter has a covariance, the
+    measurement as teal crosses, a legend and the time (the plant's
+    :meth:`~fir_gym.envs._overlay.EstimateDrawing.draw_estimate`); the bare plant's
+    frame is ``env.unwrapped.render()``.
     """
 
     def __init__(
@@ -139,6 +156,9 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.observation_kind = observation
         self._x0 = self.estimator.x
         self._P0 = self.estimator.P
+        self.estimator_label = estimator_label(self.estimator)
+        self._last_estimate: NDArray[np.float64] | None = None
+        self._last_measurement: NDArray[np.float64] | None = None
         n_x = self.estimator.model.n_x
         estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
         if observation == "estimate":
@@ -165,15 +185,35 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         y, info = self.env.reset(seed=seed, options=options)
         self.estimator.reset(self._x0, self._P0)
         x_hat = self.estimator.step(y)
+        self._remember(x_hat, y)
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         y, reward, terminated, truncated, info = self.env.step(action)
         u = info.get("action", action)
         x_hat = self.estimator.step(y, u)
+        self._remember(x_hat, y)
         return self._observe(x_hat, y), reward, terminated, truncated, self._annotate(info, x_hat)
 
+    def render(self) -> Any:
+        """The plant's frame with the estimate, its 2σ region and the measurement drawn
+        over it (see the class docstring); the plant's own frame where there is nothing
+        to draw (before the first ``reset``, or a plant that cannot place an estimate)."""
+        frame = self.env.render()
+        plant = self.env.unwrapped
+        draw = getattr(plant, "draw_estimate", None)
+        if not isinstance(frame, np.ndarray) or self._last_estimate is None or draw is None \
+                or getattr(plant, "frame_view", None) is None:
+            return frame
+        return draw(frame, self._last_estimate, self.estimator.P, self._last_measurement,
+                    label=self.estimator_label, diverged=bool(self.estimator.diverged))
+
     # ------------------------------------------------------------------ helpers
+    def _remember(self, x_hat: NDArray[np.float64], y: Any) -> None:
+        """What the next frame draws: the estimate and the measurement it came from."""
+        self._last_estimate = x_hat.copy()
+        self._last_measurement = np.array(y, dtype=np.float64)
+
     def _observe(self, x_hat: NDArray[np.float64], y: NDArray[np.float64]) -> Any:
         if self.observation_kind == "estimate":
             return x_hat

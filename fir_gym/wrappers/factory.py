@@ -9,6 +9,7 @@ with; :func:`wrap_observation` does the same for an existing env from one word
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -65,14 +66,37 @@ def make_plant(
                                 **dict(estimator_kwargs or {}))
 
 
-def plant_factory(plant: str) -> Callable[..., gym.Env]:
+class PlantEntryPoint:
+    """The entry point of one plant: ``gym.make``'s creator, with the plant's ``metadata``.
+
+    Calling it is :func:`make_plant` for that plant. ``metadata`` (the plant class's, read
+    when first asked, so registering imports no plant) is what :func:`gymnasium.make`
+    reads to wrap an env as it wraps its own: ``render_mode="rgb_array_list"`` builds the
+    plant with ``"rgb_array"`` inside :class:`gymnasium.wrappers.RenderCollection`, and
+    ``render_mode="human"`` inside :class:`gymnasium.wrappers.HumanRendering` (which needs
+    pygame and a display).
+    """
+
+    def __init__(self, plant: str) -> None:
+        self.plant = plant
+        self.__doc__ = (f"Build {plant} with optional estimator/observation options "
+                        "(see make_plant).")
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """The plant class's metadata (its ``render_modes`` and ``render_fps``), a copy."""
+        return copy.deepcopy(getattr(load_env_creator(self.plant), "metadata", {}))
+
+    def __call__(self, **kwargs: Any) -> gym.Env:
+        return make_plant(self.plant, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"PlantEntryPoint({self.plant!r})"
+
+
+def plant_factory(plant: str) -> PlantEntryPoint:
     """An entry point for ``plant`` (``"module:Class"``) that accepts the estimator options."""
-
-    def make(**kwargs: Any) -> gym.Env:
-        return make_plant(plant, **kwargs)
-
-    make.__doc__ = f"Build {plant} with optional estimator/observation options (see make_plant)."
-    return make
+    return PlantEntryPoint(plant)
 
 
 def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:

@@ -14,7 +14,12 @@ from numpy.typing import NDArray
 from fir_gym.estimators import Estimator
 from fir_gym.estimators._validation import one_of
 
-from .estimator_observation import OBSERVATION_KINDS, build_estimator, estimator_class_of
+from .estimator_observation import (
+    OBSERVATION_KINDS,
+    build_estimator,
+    estimator_class_of,
+    estimator_label,
+)
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -38,6 +43,13 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     :class:`EstimatorObservation` would do. ``info`` gains ``estimate``,
     ``estimation_error`` (where ``state`` is known) and ``estimator_diverged``, each
     with Gymnasium's ``_key`` mask.
+
+    ``render()`` returns the vector env's frames (one per sub-env, with
+    ``render_mode="rgb_array"``) with each system's estimate, 2σ region and
+    measurement drawn over its sub-env's frame, as
+    :class:`~fir_gym.wrappers.EstimatorObservation` draws them. That needs the plant
+    behind each frame: a native or a sync vector env; the frames of an async one are
+    returned as they are.
     """
 
     def __init__(self, env: VectorEnv, estimator: type[Estimator] | str,
@@ -72,6 +84,8 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         self.single_observation_space = single
         self.observation_space = batch_space(single, n)
         self._prev_done = np.zeros(n, dtype=bool)
+        self.estimator_label = estimator_label(self.estimator)
+        self._last: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -79,6 +93,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
         self._prev_done[:] = False
+        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
@@ -90,8 +105,25 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1),
                                     u)
         self._prev_done = np.logical_or(terminated, truncated)
+        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
         return self._observe(x_hat, y), reward, terminated, truncated, \
             self._annotate(info, x_hat)
+
+    def render(self) -> Any:
+        """The sub-envs' frames with each system's estimate drawn over its frame."""
+        frames: Any = self.env.render()
+        plants = _frame_plants(self.env, len(frames)) if isinstance(frames, (tuple, list)) \
+            else None
+        if plants is None or self._last is None:
+            return frames
+        x_hat, y = self._last
+        P = self.estimator.P
+        diverged = np.broadcast_to(np.asarray(self.estimator.diverged), (self.num_envs,))
+        return tuple(
+            plant.draw_estimate(frame, x_hat[i], None if P is None else P[i], y[i],
+                                label=self.estimator_label, diverged=bool(diverged[i]),
+                                view=view)
+            for i, (frame, (plant, view)) in enumerate(zip(frames, plants, strict=True)))
 
     def _observe(self, x_hat: NDArray[np.float64], y: Any) -> Any:
         if self.observation_kind == "estimate":
@@ -128,3 +160,22 @@ def _plant_attr(env: VectorEnv, name: str) -> Any:
         return base.get_attr(name)[0]                   # sync / async: from sub-env 0
     except AttributeError:
         return None
+
+
+def _frame_plants(env: VectorEnv, n: int) -> list[tuple[Any, Any]] | None:
+    """``(plant, view)`` behind each of the ``n`` frames the vector env just rendered:
+    the native env's plant with each frame's view, or a sync env's sub-env plants; None
+    where they cannot be reached (an async env) or cannot draw an estimate."""
+    base = env.unwrapped
+    views, plant = getattr(base, "frame_views", None), getattr(base, "plant", None)
+    if views is not None and plant is not None:                           # native
+        pairs = [(plant, view) for view in views]
+    elif hasattr(base, "envs"):                                           # sync
+        plants = [sub.unwrapped for sub in base.envs]
+        pairs = [(plant, getattr(plant, "frame_view", None)) for plant in plants]
+    else:
+        return None
+    if len(pairs) != n or any(view is None or not hasattr(plant, "draw_estimate")
+                              for plant, view in pairs):
+        return None
+    return pairs
