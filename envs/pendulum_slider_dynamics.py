@@ -25,8 +25,9 @@ The ``μ`` terms are ``s μ N`` with the rail's normal force
   resolved and the Jacobian ignores the jump);
 * ``"none"`` — ``s = 0``.
 
-**Printed equations** (``equations``). Paper 003 prints two other versions of
-these equations, both unphysical, offered to run its experiment as printed:
+**Printed equations** (``equations``; docs/papers.md#003-printed-equations and
+docs/papers.md#003-eq-15). Paper 003 prints two other versions of these equations, both
+unphysical, offered to run its experiment as printed:
 
 * ``"printed-eq15"`` — eq (15), the state-space form the paper's UKF uses: the
   coupling ``−m2 l (cosθ − μ sinθ)`` is the Lagrangian's, but the centripetal term

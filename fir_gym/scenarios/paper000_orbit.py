@@ -11,7 +11,8 @@ its re-anchored nominal are named variants.
 The paper does not give Fig. 1's horizon; :data:`STEPS` measurement intervals are
 long enough for the EKF's inconsistency to grow by orders of magnitude. Fig. 1's
 claim ("the EKF diverges quickly, the EFIR does not") is tested in two readings:
-divergence of the error, and of the consistency (NEES).
+divergence of the error, and of the consistency (NEES) — docs/papers.md#000-sim-1-divergence.
+The window counts measurements (docs/papers.md#000-sim-1-window).
 
 Two stages for the runner: one task per episode (its own seed), then one task per
 filter on all episodes (batched over the runs).

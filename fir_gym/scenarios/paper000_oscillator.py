@@ -4,7 +4,8 @@
 R = 0.1, Δ = 0.01, x0 = [0, 0, 0.5], δ_k = 0.15 for 350 ≤ k ≤ 400. Every filter
 starts at the true state with P0 = 2 I; the EFIR has N = 10 (predictor form, open-
 loop nominal, as the paper). Three ambiguities, every combination run
-(:data:`READINGS`):
+(:data:`READINGS`; docs/papers.md#000-eq-29-readings, #000-sim-2-noise-input and
+docs/papers.md#000-sim-2-r-reading):
 
 * eq (29): δ scales the state (``"state"``, as printed) or the rate term (``"rate"``);
 * the filters' noise input: the plant's ``G = [0; Δ; 0]`` or ``G = I`` (Theorem 1's
@@ -14,7 +15,8 @@ loop nominal, as the paper). Three ambiguities, every combination run
 
 Table 1 is the sum over k = 350..400 of the Monte Carlo RMSE of x₁ at each k.
 Beside it: the floor no unbiased 10-measurement FIR estimate can beat
-(:func:`unbiased_floor`), and the claims of §5 around Fig. 2 (:mod:`.paper000_claims`).
+(:func:`unbiased_floor`, docs/papers.md#000-table-1-floor), and the claims of §5 around
+Fig. 2 (:mod:`.paper000_oscillator_report`, docs/papers.md#000-sim-2-claims).
 Each task simulates one reading's data (seeded chunks of the vector env) and runs a
 group of filters on it; the client only assembles.
 """

@@ -1,5 +1,7 @@
 """Paper 000, simulation 2: Table 1 under every reading, and the claims of §5 around Fig. 2.
 
+See docs/papers.md#000-sim-2-claims for the claims and how each is measured.
+
 The claims (§5, about Fig. 2 and Table 1), each measured on the x₁ RMSE under every
 reading of :data:`~.paper000_oscillator.READINGS`:
 

@@ -6,7 +6,8 @@ uncertainty ``|Δq| ≤ 0.01``, ``|Δv| ≤ 0.1`` (Δπ₁, Theorem 3.1) and mod
 ``|Δ22| ≤ 0.006``, ``|Δc| ≤ 0.1`` (Δπ₂, Theorem 4.1), evaluated "with the upper
 bounds substituted" — here on every corner of each box, reporting the largest.
 
-Two ambiguities, both run (:data:`READINGS`):
+Two ambiguities, both run (:data:`READINGS`; docs/papers.md#001-true-vs-nominal and
+docs/papers.md#001-eq-3-3-transition):
 
 * which system is true: ``"perturbed"`` — the data come from the paper's values and
   the filter is designed with the perturbed ones (§II's ``A_M = A + ΔA``);

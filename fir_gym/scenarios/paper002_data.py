@@ -1,7 +1,7 @@
 """Paper 002's data: VanDerPol-v0 episodes under each reading of its noise, and counted models.
 
 Paper 002 writes the noise input ``[1, 1]ᵀ w`` with ``Q = 5·I``, which does not
-conform. Two readings (:data:`NOISE_READINGS`):
+conform. Two readings (:data:`NOISE_READINGS`; docs/papers.md#002-noise-reading):
 
 * ``"G1"`` — one scalar noise ``w`` (``Q = 5``) drives both states through
   ``[1, 1]ᵀ``: VanDerPol-v0 itself, simulated by its native vector env;

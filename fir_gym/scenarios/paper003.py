@@ -8,9 +8,10 @@ with ``Q = 1e-6 I``, ``P0 = I6`` and a zero initial estimate. The least-squares 
 Carlo over measurement-noise seeds gives every figure as mean ± spread.
 
 The paper gives neither the input, the initial state, the duration nor the window
-its RMSEs are taken over. A :class:`Cell` fixes them (input ``A sin 2πft`` N, initial
+its RMSEs are taken over (docs/papers.md#003-experiment-reading). A :class:`Cell` fixes them (input ``A sin 2πft`` N, initial
 angle θ₀ from the rest position, duration ``T``) and the equations of motion
-(physical, or the printed eq 15 / eq 5 of PendulumSlider-v0's ``dynamics``). Named
+(physical, or the printed eq 15 / eq 5 of PendulumSlider-v0's ``dynamics``,
+docs/papers.md#003-printed-equations). Named
 cells (:data:`CELLS`): ``quiet`` (5 N, 1 Hz, from rest, 1 s: our default), ``lively``
 (10 N, 1 Hz, θ₀ = 0.5 rad, 5 s, scored from 0.5 s) and the printed equations on both;
 :data:`SWEEP` varies amplitude, frequency, initial angle and duration. Each task is a

@@ -5,7 +5,8 @@ Monte Carlo standard errors: an RMSE's by the delta method over the runs' mean s
 a mean's the runs' standard deviation over √M. The claims ("the estimated parameters
 are within 3 %", "they converge within 100 samples") are judged on the Monte Carlo mean
 *and* per run (the paper shows one run): per run, the claim holds when at least
-:data:`~.paper003.CLAIM_SHARE` of the runs meet it.
+:data:`~.paper003.CLAIM_SHARE` of the runs meet it (docs/papers.md#003-claims). The LSM's
+bias law: docs/papers.md#003-lsm.
 """
 
 from __future__ import annotations

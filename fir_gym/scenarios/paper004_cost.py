@@ -2,7 +2,8 @@
 solution, counted while they run.
 
 Paper 004 states that the direct solution of (2.4) inverts a ``q(N+1) × q(N+1)``
-matrix, "of order q³N³", and that Theorem 2.1 needs, for each ``j``, a ``q × q``
+matrix, "of order q³N³" (docs/papers.md#004-cost), and that Theorem 2.1 needs, for
+each ``j``, a ``q × q``
 inverse and matrix products, so that its cost "is of order q³N³" too (a slip: per
 step the Riccati recursion (2.8) costs ``O(n³ + q³)``, and the impulse responses
 (2.7), propagated forward for every ``j``, ``O(N² n² q)``).

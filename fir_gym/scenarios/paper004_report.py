@@ -1,4 +1,8 @@
-"""Paper 004's report: its theorems and claims, each measured, and the comparison it left open."""
+"""Paper 004's report: its theorems and claims, each measured, and the comparison it left open.
+
+The recursion's warning is tested as a perturbation that is not forgotten
+(docs/papers.md#004-recursive-form); the cost claims by counting (docs/papers.md#004-cost).
+"""
 
 from __future__ import annotations
 
