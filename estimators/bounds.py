@@ -25,8 +25,9 @@ exact difference, not a bound. The step 3.9 → 3.10 misapplies Lemma 1 (eq 1.5)
 which gives the valid ``|tr(Φ Y Φᵀ)| ≤ ‖ΦᵀΦ‖_F ‖Y‖_F``. :func:`delta_pi1` returns
 the paper's reading, that Lemma-1 bound and the exact trace.
 
-**Which transition Φ_F** (docs/papers.md#001-eq-3-3-transition). Eq 3.7 (the solution of 3.6) and the bound built on it
-use ``Φ_F(T, τ)``, from ``τ`` to the window's end. Eqs 3.2–3.4 as printed write
+**Which transition Φ_F** (docs/papers.md#001-eq-3-3-transition). Eq 3.7 (the
+solution of 3.6) and the bound built on it use ``Φ_F(T, τ)``, from ``τ`` to the
+window's end. Eqs 3.2–3.4 as printed write
 ``Φ_F(t, τ)`` but define it by ``d/dt Φ_F(t, τ) = [A_M − K_M(t, σ) C_M] Φ_F(t, τ)``,
 mixing the time ``t`` with the window time ``σ``; integrated in ``σ`` from the window
 start it is ``Φ_F(τ, 0)``, the transition from ``σ = 0`` to ``τ``.

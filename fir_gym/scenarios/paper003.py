@@ -8,11 +8,11 @@ with ``Q = 1e-6 I``, ``P0 = I6`` and a zero initial estimate. The least-squares 
 Carlo over measurement-noise seeds gives every figure as mean ± spread.
 
 The paper gives neither the input, the initial state, the duration nor the window
-its RMSEs are taken over (docs/papers.md#003-experiment-reading). A :class:`Cell` fixes them (input ``A sin 2πft`` N, initial
-angle θ₀ from the rest position, duration ``T``) and the equations of motion
-(physical, or the printed eq 15 / eq 5 of PendulumSlider-v0's ``dynamics``,
-docs/papers.md#003-printed-equations). Named
-cells (:data:`CELLS`): ``quiet`` (5 N, 1 Hz, from rest, 1 s: our default), ``lively``
+its RMSEs are taken over (docs/papers.md#003-experiment-reading). A :class:`Cell`
+fixes them (input ``A sin 2πft`` N, initial angle θ₀ from the rest position, duration
+``T``) and the equations of motion (physical, or the printed eq 15 / eq 5 of
+PendulumSlider-v0's ``dynamics``, docs/papers.md#003-printed-equations). Named cells
+(:data:`CELLS`): ``quiet`` (5 N, 1 Hz, from rest, 1 s: our default), ``lively``
 (10 N, 1 Hz, θ₀ = 0.5 rad, 5 s, scored from 0.5 s) and the printed equations on both;
 :data:`SWEEP` varies amplitude, frequency, initial angle and duration. Each task is a
 chunk of runs of one cell — episodes, the batched UKF/EKF, the LSM — reduced to per-run
@@ -288,7 +288,7 @@ def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:
     by_length: dict[float, list[Cell]] = {}
     for c in sweep(quick):
         by_length.setdefault(c.seconds, []).append(c)
-    for length, group in by_length.items():
+    for group in by_length.values():
         for k in range(0, len(group), SWEEP_GROUP):
             cells = tuple(group[k:k + SWEEP_GROUP])
             jobs.append((("sweep",) * len(cells), cells, runs_for(cells[0], n_sweep)))
