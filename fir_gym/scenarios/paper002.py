@@ -6,8 +6,8 @@ with noise input ``[1, 1]ᵀ w``, ``z = x1 + v``, ``Q = 5·I``, ``R = 5``, ``P0 
 figure (no numbers). Here the same settings run as a fixed-seed Monte Carlo under
 both readings of its noise (:mod:`.paper002_data`: one scalar noise through
 ``[1, 1]ᵀ``, or ``G = I``; docs/papers.md#002-noise-reading), each observation the
-interval average of ``z`` (variance ``R/h = 50``), and the block-pulse Kalman filter (BPF-KF) is compared
-with a continuous–discrete EKF on the same data. The abstract's "computational
+interval average of ``z`` (variance ``R/h = 50``), and the block-pulse Kalman filter
+(BPF-KF) is compared with a continuous–discrete EKF on the same data. The abstract's "computational
 advantages" are measured as model evaluations per interval (deterministic;
 docs/papers.md#002-cost).
 """
