@@ -47,12 +47,13 @@ def run_episode(env_id: str, seed: int = 0) -> EpisodeSummary:
     """Run one scripted episode of ``env_id`` and summarise it."""
     description, script = SCRIPTS.get(env_id, ("zero input", lambda k: 0.0))
     env = gym.make(env_id)
-    plant = env.unwrapped
+    plant: Any = env.unwrapped
+    shape = tuple(env.action_space.shape or ())
     obs, info = env.reset(seed=seed)
     states, residuals, ret = [info["state"]], [], 0.0
     k, terminated, truncated = 0, False, False
     while not (terminated or truncated):
-        action = np.full(env.action_space.shape, script(k), dtype=np.float32)
+        action = np.full(shape, script(k), dtype=np.float32)
         obs, reward, terminated, truncated, info = env.step(action)
         states.append(info["state"])
         noise_free = info.get("x1_average", plant.model.h(info["state"])[0])

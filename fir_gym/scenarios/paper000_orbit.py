@@ -59,10 +59,11 @@ TAIL = 0.1
 
 def orbit_filter(name: str, model: Any) -> Any:
     """One filter of Fig. 1 (or an EFIR variant) on the env's model (μ = 19.91)."""
-    common = {"x0": X0_FILTER, "P0": P0, "nan_policy": "skip"}
+    common: dict[str, Any] = {"x0": X0_FILTER, "P0": P0, "nan_policy": "skip"}
     if name == "EKF":
         return ExtendedKalmanFilter(model, **common)
-    variant = {PAPER_FILTER: {"form": "predictor"}, "EFIR filter form": {"form": "filter"},
+    variant: dict[str, Any] = {PAPER_FILTER: {"form": "predictor"},
+                               "EFIR filter form": {"form": "filter"},
                "EFIR re-anchored nominal": {"form": "predictor", "nominal": "reanchor"}}[name]
     return ExtendedFIRFilter(model, horizon=HORIZON, **variant, **common)
 

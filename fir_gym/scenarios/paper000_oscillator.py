@@ -111,7 +111,7 @@ def identity_noise_model(model: StateSpaceModel) -> StateSpaceModel:
 def oscillator_filters(model: StateSpaceModel, *, variants: bool = True) -> dict[str, Any]:
     """Table 1's filters (keys as in the paper), the EFIR's filter form and, with
     ``variants``, its re-anchored nominal."""
-    common = {"x0": X0, "P0": P0, "nan_policy": "skip"}
+    common: dict[str, Any] = {"x0": X0, "P0": P0, "nan_policy": "skip"}
     out: dict[str, Any] = {
         "EFIRF": ExtendedFIRFilter(model, horizon=HORIZON, form="predictor", **common),
         "EFIRF filter form": ExtendedFIRFilter(model, horizon=HORIZON, form="filter", **common),

@@ -54,6 +54,11 @@ def _onset(rmse: np.ndarray, level: float) -> int | None:
     return None if not above.size else WINDOW[0] + int(above[0])
 
 
+def _later(efir: int | None, iir: list[int | None]) -> bool:
+    """Every IIR filter's error rose, and the EFIR's later (or never)."""
+    return all(o is not None and (efir is None or efir > o) for o in iir)
+
+
 def _steps(rec: int | None, K: int) -> Any:
     return say("> {n}", n=K - WINDOW[1] - 1) if rec is None else rec
 
@@ -74,7 +79,9 @@ def claims(res: dict[str, Any], K: int) -> list[tuple[str, str, str, bool]]:
 
     def slower(rec: dict[str, int | None]) -> bool:
         e = rec["EFIRF"]
-        return e is not None and e <= HORIZON and all(rec[n] is None or rec[n] > e for n in IIR)
+        if e is None or e > HORIZON:
+            return False
+        return all(r is None or r > e for r in (rec[n] for n in IIR))
 
     def listing(values: dict[str, Any], fmt: str) -> str:
         return join([say("{n} " + fmt, n=n, v=v) for n, v in values.items()])
@@ -89,7 +96,7 @@ def claims(res: dict[str, Any], K: int) -> list[tuple[str, str, str, bool]]:
         ("the EFIR's error appears later (delayed)",
          say("first k ≥ {k} above {lvl}", k=WINDOW[0], lvl=own_level),
          listing({n: ("never" if v is None else v) for n, v in onset.items()}, "{v}"),
-         all(onset[n] is not None and (efir_on is None or efir_on > onset[n]) for n in IIR)),
+         _later(efir_on, [onset[n] for n in IIR])),
         ("the EFIR's error during the uncertainty is small",
          say("peak x₁ RMSE over k = {a}..{b}", a=WINDOW[0], b=WINDOW[1]),
          listing(peak, "{v:.3g}"), all(peak["EFIRF"] < peak[n] for n in IIR)),

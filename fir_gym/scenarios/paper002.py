@@ -94,7 +94,7 @@ def filters(cm: ContinuousModel) -> dict[str, Estimator]:
     ``A(x)`` in place of the Jacobian for its covariance), all with the paper's prior."""
     sdc = ContinuousModel(a=cm.a, J=lambda x, u: cm.A_of_x(x), A_of_x=cm.A_of_x, h=cm.h,
                           H=cm.H, G=cm.G, Q=cm.Q, R=cm.R, dt=cm.dt, n_u=1)
-    prior = {"x0": PRIOR_MEAN, "P0": PRIOR_COV, "nan_policy": "skip"}
+    prior: dict[str, Any] = {"x0": PRIOR_MEAN, "P0": PRIOR_COV, "nan_policy": "skip"}
     return {BPF: BlockPulseKalmanFilter(cm, **prior),
             GLOBAL: BlockPulseKalmanFilter(cm, riccati="global", **prior),
             CDEKF: ContinuousDiscreteEKF(cm, **prior),

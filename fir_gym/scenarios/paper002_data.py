@@ -37,11 +37,10 @@ CHUNK = 50
 def env_params() -> dict[str, Any]:
     """VanDerPol-v0's parameters (the paper's: ε = 1, Q = 5, R = 5, h = 0.1, 100 intervals)."""
     env = gym.make(ENV_ID)
-    plant = env.unwrapped
-    params = {**plant.nominal_params,                          # type: ignore[attr-defined]
-              "state_bound": float(plant.state_bound),          # type: ignore[attr-defined]
-              "initial_state": tuple(plant.initial_state),      # type: ignore[attr-defined]
-              "steps": int(env.spec.max_episode_steps)}         # type: ignore[union-attr]
+    plant: Any = env.unwrapped
+    spec: Any = env.spec
+    params = {**plant.nominal_params, "state_bound": float(plant.state_bound),
+              "initial_state": tuple(plant.initial_state), "steps": int(spec.max_episode_steps)}
     env.close()
     return params
 

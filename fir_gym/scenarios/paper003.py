@@ -92,10 +92,11 @@ CELLS = {"quiet": QUIET, "lively": LIVELY,
          "eq5·lively": replace(LIVELY, dynamics="printed-eq5")}
 DEFAULT = "quiet"
 #: the sensitivity sweep (physical equations), full and quick
-SWEEP_AXES = {False: {"amplitude": (5.0, 10.0), "frequency": (1.0, 2.0), "theta0": (0.0, 0.5),
-                      "seconds": (1.0, 5.0)},
-              True: {"amplitude": (5.0, 10.0), "frequency": (1.0,), "theta0": (0.0, 0.5),
-                     "seconds": (1.0,)}}
+SWEEP_AXES: dict[bool, dict[str, tuple[float, ...]]] = {
+    False: {"amplitude": (5.0, 10.0), "frequency": (1.0, 2.0), "theta0": (0.0, 0.5),
+            "seconds": (1.0, 5.0)},
+    True: {"amplitude": (5.0, 10.0), "frequency": (1.0,), "theta0": (0.0, 0.5),
+           "seconds": (1.0,)}}
 #: the two scorings of every sweep cell: (t4, t5)
 SCORINGS = ((0.0, 0.1), (0.5, 0.5))
 RUNS = {False: 50, True: 5}
@@ -105,9 +106,13 @@ CHUNK = 10
 
 def sweep(quick: bool) -> list[Cell]:
     """Every combination of :data:`SWEEP_AXES` (scored both ways, :data:`SCORINGS`)."""
-    axes = SWEEP_AXES[quick]
-    return [Cell(**dict(zip(axes, values, strict=True)))
-            for values in itertools.product(*axes.values())]
+    axes: dict[str, tuple[float, ...]] = SWEEP_AXES[quick]
+    out = []
+    for values in itertools.product(*axes.values()):
+        v = dict(zip(axes, values, strict=True))
+        out.append(Cell(amplitude=v["amplitude"], frequency=v["frequency"], theta0=v["theta0"],
+                        seconds=v["seconds"]))
+    return out
 
 
 @dataclass
@@ -244,7 +249,7 @@ def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[s
         for method, e_all in est.items():
             e = e_all[:, runs]
             err = e[..., 4:] - truth
-            r: dict[str, Any] = {}
+            r: dict[Any, Any] = {}
             for t4, t5 in {(cell.t4, cell.t5), *SCORINGS}:
                 s4, s5 = t >= t4 - DT / 2, t >= t5 - DT / 2
                 r[("state", t4)] = np.nansum((e[s4, :, :4] - X[s4]) ** 2, axis=0)

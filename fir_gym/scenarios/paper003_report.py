@@ -69,7 +69,7 @@ def scores(parts: list[dict[str, Any]], cell: Cell) -> dict[str, Any]:
     for method in ("ukf", "ekf"):
         if method not in parts[0]:
             continue
-        r: dict[str, Any] = {}
+        r: dict[Any, Any] = {}
         for key in {k for k in parts[0][method] if isinstance(k, tuple) and k[0] != "n"}:
             t0 = key[1]
             sse = np.concatenate([p[method][key] for p in parts])
@@ -343,9 +343,10 @@ def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> Non
              for sg in SCORINGS for s, v, e in zip(STATES, *sc["ukf"][("state", sg[0])],
                                                     strict=True))
     m4 = len(swept) * len(SCORINGS) * len(STATES)
-    lively_closer = (lsm_m0["lively"] is not None and lsm_m0[DEFAULT] is not None
-                     and abs(lsm_m0["lively"] - float(PAPER_TABLE5["LSM"]["M0"]))
-                     < abs(lsm_m0[DEFAULT] - float(PAPER_TABLE5["LSM"]["M0"]))
+    lsm_lv, lsm_q = lsm_m0["lively"], lsm_m0[DEFAULT]
+    paper_m0 = float(PAPER_TABLE5["LSM"]["M0"])
+    lively_closer = (lsm_lv is not None and lsm_q is not None
+                     and abs(lsm_lv - paper_m0) < abs(lsm_q - paper_m0)
                      and abs(np.log(ratio["lively"])) < abs(np.log(ratio[DEFAULT])))
     report.notes += [
         say("Table 5, UKF M0: our RMSE is {a:.2g}× the paper's {p} on the quiet trajectory and "

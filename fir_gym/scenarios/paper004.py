@@ -61,7 +61,7 @@ GROWN = 1e-6
 def example_model(**env_kwargs: Any) -> LinearModel:
     """CarrierMotion-v0's nominal model without its (zero) input matrix: paper 004's (2.1)."""
     env = gym.make(ENV_ID, **env_kwargs)
-    m = env.unwrapped.model
+    m: Any = env.unwrapped.model                        # type: ignore[attr-defined]
     env.close()
     return LinearModel(A=m.A, C=m.C, Q=m.Q, R=m.R, G=m.G, dt=m.dt, name="carrier (paper 001)")
 

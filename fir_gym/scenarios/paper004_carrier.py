@@ -91,9 +91,10 @@ def comparison_plan(seed: int, quick: bool, runs: int | None) -> Stage:
         for corner in CORNERS:
             parts = [r for (c, _), r in zip(keys, results, strict=True) if c == corner]
             samples = runs * (STEPS + 1 - SCORE_FROM)
-            rmse[corner] = {key: tuple(float(v) for v in np.sqrt(sum(p[key] for p in parts)
-                                                                 / samples))
-                            for key in parts[0]}
+            rmse[corner] = {}
+            for key in parts[0]:
+                x1, x2 = np.sqrt(sum(p[key] for p in parts) / samples)
+                rmse[corner][key] = (float(x1), float(x2))
         return {"rmse": rmse, "windows": windows, "runs": runs, "dt": dt}
 
     return Stage(tasks, then, desc="paper 004")
@@ -109,7 +110,10 @@ def summary(res: dict[str, Any]) -> dict[str, Any]:
     """Worst corner per filter, the best FIR of each family, and the KF, for the report."""
     rmse = res["rmse"]
     keys = list(rmse[CORNERS[0]])
-    worst = {key: max(CORNERS[1:], key=lambda c, key=key: rmse[c][key][0]) for key in keys}
+    def worst_corner(key: tuple[str, int | None]) -> tuple[float, float]:
+        return max(CORNERS[1:], key=lambda c: rmse[c][key][0])
+
+    worst = {key: worst_corner(key) for key in keys}
     worst_val = {key: rmse[worst[key]][key][0] for key in keys}
     nominal = {key: rmse[CORNERS[0]][key][0] for key in keys}
     best = {}

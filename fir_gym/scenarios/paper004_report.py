@@ -28,9 +28,10 @@ ORDER_TOLERANCE = 0.3
 def fill(report: Report, horizons: tuple[int, ...]) -> None:
     f = report.figures
     rows, ti, rec, comp = f["gain_paths"], f["time_invariance"], f["recursion"], f["comparison"]
-    codes = {name: say("ex{i}", i=i + 1) for i, name in enumerate(EXAMPLES)}
-    legend = {codes[name]: say("the carrier of paper 001 §V as CarrierMotion-v0 samples it: {n}",
-                               n=name) for name in EXAMPLES}
+    codes: dict[str, str] = {name: say("ex{i}", i=i + 1) for i, name in enumerate(EXAMPLES)}
+    legend: dict[str, str] = {
+        codes[name]: say("the carrier of paper 001 §V as CarrierMotion-v0 samples it: {n}", n=name)
+        for name in EXAMPLES}
     first = next(iter(EXAMPLES))
     model = example_model()
     setup = say("no numerical example in the paper: its theorems checked on a documented model; "

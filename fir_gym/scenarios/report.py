@@ -11,6 +11,7 @@ by :func:`number_verdict` or :func:`claim`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -185,7 +186,7 @@ class Report:
         """Every summary row, in order."""
         return [row for s in self.summaries for row in s.rows]
 
-    def summary(self, title: str, setup: str, readings: dict[str, str] | None = None
+    def summary(self, title: str, setup: str, readings: Mapping[str, str] | None = None
                 ) -> Summary:
         """Start a summary table (``setup``: one line; ``readings``: code -> meaning)."""
         s = Summary(title, setup, dict(readings or {}))
