@@ -155,23 +155,34 @@ def _best_row(s: Any, quantity: str, paper: Any, best: tuple[Any, ...]) -> None:
                   br="brackets" if lo <= float(paper) <= hi else "does not bracket"))
 
 
+def _ukf_rows(s: Any, quantity: str, paper: Any, named: dict[str, Any],
+              swept: dict[Cell, Any], kind: str, i: int, note: Any) -> None:
+    """One row per named cell for entry ``i`` of a UKF RMSE (``kind``: ``"state"``, Table 4,
+    or ``"param"``, Table 5), and the sweep's nearest cell; ``note(rmse, se, cell)``."""
+    def window(c: Cell) -> float:
+        return c.t4 if kind == "state" else c.t5
+
+    for name, sc in named.items():
+        rmse, se = sc["ukf"][(kind, window(sc["cell"]))]
+        s.compare(quantity, paper, float(rmse[i]), name,
+                  number_verdict(paper, rmse[i], se=se[i], reading=_reading(name),
+                                 otherwise="ambiguous"),
+                  note(float(rmse[i]), float(se[i]), sc["cell"]))
+    scoring = 0 if kind == "state" else 1
+    _best_row(s, quantity, paper, _best(
+        swept, float(paper), lambda sc, sg: tuple(v[i] for v in sc["ukf"][(kind, sg[scoring])])))
+
+
 def _table4(report: Report, named: dict[str, Any], swept: dict[Cell, Any], setup: str,
             legend: dict[str, str], sigma: np.ndarray) -> None:
     s = report.summary("Table 4: state RMSE of the UKF estimate", setup, legend)
     for i, state in enumerate(STATES):
         paper = PAPER_TABLE4[state][0]
-        quantity = say("Table 4: UKF RMSE, {s}", s=state)
-        for name, sc in named.items():
-            rmse, se = sc["ukf"][("state", sc["cell"].t4)]
-            s.compare(quantity, paper, float(rmse[i]), name,
-                      number_verdict(paper, rmse[i], se=se[i], reading=_reading(name),
-                                     otherwise="ambiguous"),
-                      say("{p:+.0f} % against the paper (± {e:.1g} one s.e.); the paper gives "
-                          "neither the input, the start nor the duration",
-                          p=100 * (rmse[i] / float(paper) - 1), e=se[i]))
-        _best_row(s, quantity, paper, _best(
-            swept, float(paper), lambda sc, sg, i=i: tuple(v[i] for v in sc["ukf"][("state",
-                                                                                     sg[0])])))
+        _ukf_rows(s, say("Table 4: UKF RMSE, {s}", s=state), paper, named, swept, "state", i,
+                  lambda r, se, c, paper=paper: say(
+                      "{p:+.0f} % against the paper (± {e:.1g} one s.e.); the paper gives "
+                      "neither the input, the start nor the duration",
+                      p=100 * (r / float(paper) - 1), e=se))
     m = report.summary("Table 4: measurement RMSE", setup, {DEFAULT: legend[DEFAULT]})
     sc = named[DEFAULT]
     for i, state in enumerate(STATES):
@@ -187,17 +198,9 @@ def _table5(report: Report, named: dict[str, Any], swept: dict[Cell, Any], setup
     s = report.summary("Table 5: parameter errors (UKF RMSE; LSM error)", setup, legend)
     for j, p in enumerate(PARAMS):
         paper = PAPER_TABLE5["UKF"][p]
-        quantity = say("Table 5: UKF RMSE, {p}", p=p)
-        for name, sc in named.items():
-            rmse, se = sc["ukf"][("param", sc["cell"].t5)]
-            s.compare(quantity, paper, float(rmse[j]), name,
-                      number_verdict(paper, rmse[j], se=se[j], reading=_reading(name),
-                                     otherwise="ambiguous"),
-                      say("{r:.2g}× the paper's (RMSE over t ≥ {t:g} s)", r=rmse[j] / float(paper),
-                          t=sc["cell"].t5))
-        _best_row(s, quantity, paper, _best(
-            swept, float(paper), lambda sc, sg, j=j: tuple(v[j] for v in sc["ukf"][("param",
-                                                                                     sg[1])])))
+        _ukf_rows(s, say("Table 5: UKF RMSE, {p}", p=p), paper, named, swept, "param", j,
+                  lambda r, se, c, paper=paper: say("{r:.2g}× the paper's (RMSE over t ≥ {t:g} s)",
+                                       r=r / float(paper), t=c.t5))
     for j, p in enumerate(PARAMS):
         paper = PAPER_TABLE5["LSM"][p]
         quantity = say("Table 5: LSM error (backward differences), {p}", p=p)
