@@ -155,3 +155,32 @@ def test_plot_writes_figures_1_and_2(report, tmp_path):
     assert len(report.images) == 2
     for path in report.images.values():
         assert (tmp_path / path).stat().st_size > 10_000
+
+
+def test_identity_noise_reading_against_a_textbook_linearised_kalman_filter():
+    """The G = I reading of the filters: the LKF on identity_noise_model equals a plain numpy
+    linearised Kalman filter written here (nominal from x0 open loop, F and H along it,
+    Q = 0.4 I, R from the env) on one seeded episode of the printed reading."""
+    model = plant_model(R_READINGS["Rvar"])
+    gi = paper000_oscillator.identity_noise_model(model)
+    np.testing.assert_allclose(gi.GQGT, 0.4 * np.eye(3))
+    ep = paper000_oscillator.simulate("state", seed=3, runs=1, steps=420)
+    lkf = paper000_oscillator.oscillator_filters(gi, variants=False)["LKF"]
+    ours = paper000_oscillator.run_filter(lkf, ep.Y, ep.U).x[:, 0]
+    u = np.zeros(1)
+    xn = np.array(paper000_oscillator.X0)
+    dx, P = np.zeros(3), paper000_oscillator.P0.copy()
+    Q, R = 0.4 * np.eye(3), model.R
+    ref = []
+    for k in range(ep.Y.shape[0]):
+        if k:
+            F = model.F(xn, u)
+            xn = model.f(xn, u)
+            dx, P = F @ dx, F @ P @ F.T + Q
+        H = model.H(xn)
+        S = H @ P @ H.T + R
+        K = P @ H.T @ np.linalg.inv(S)
+        dx = dx + K @ (ep.Y[k, 0] - model.h(xn) - H @ dx)
+        P = (np.eye(3) - K @ H) @ P
+        ref.append(xn + dx)
+    np.testing.assert_allclose(ours, np.array(ref), rtol=1e-8, atol=1e-8)
