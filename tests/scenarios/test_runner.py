@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fir_gym.scenarios.plan import Stage, Task, execute, gather, run_plan
-from fir_gym.scenarios.runner import Runner
+from fir_gym.scenarios.runner import Runner, blas_threads
 from fir_gym.scenarios.runner import seeded_normals as noisy_task
 
 TASKS = [(seed, 2.0) for seed in range(7)]
@@ -17,6 +17,13 @@ def test_serial_and_joblib_agree_bit_for_bit():
     assert len(serial) == len(TASKS)
     for a, b in zip(serial, parallel, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_workers_run_tasks_with_the_blas_threads_asked_for():
+    """The tasks see the BLAS thread limit in the worker (threadpoolctl's own report)."""
+    limited = Runner("joblib", jobs=2).map(blas_threads, [0, 1])
+    assert all(n <= 1 for n in limited)
+    assert Runner("joblib", jobs=2, blas_threads=None).map(blas_threads, [0]) is not None
 
 
 def test_dask_local_cluster_agrees_bit_for_bit():
@@ -35,6 +42,8 @@ def test_bad_arguments():
         Runner("joblib", jobs=0)
     with pytest.raises(ValueError, match="scheduler"):
         Runner("joblib", scheduler="tcp://x:1")
+    with pytest.raises(ValueError, match="blas_threads"):
+        Runner("joblib", blas_threads=0)
     assert Runner().map(noisy_task, []) == []
 
 
