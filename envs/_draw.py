@@ -3,6 +3,10 @@
 Pure numpy, no display and no extra dependency: filled circles, thick line
 segments, rectangles and polylines, anti-aliasing-free. World coordinates are
 mapped to pixels by :meth:`Canvas.set_view` (y up).
+
+Any coordinate may be NaN, infinite or huge (a plant drawn at a broken state): a
+shape whose pixel box is not finite is not drawn, one that reaches off the canvas is
+cut at its edge, so drawing never fails on the numbers it is given.
 """
 
 from __future__ import annotations
@@ -103,6 +107,12 @@ class Canvas:
         if c0 < c1 and r0 < r1:
             self.image[r0:r1, c0:c1] = color
 
+    def frame(self, color: Color, width: int = 6) -> None:
+        """A border of ``width`` pixels around the whole canvas."""
+        image = self.image
+        image[:width], image[-width:] = color, color
+        image[:, :width], image[:, -width:] = color, color
+
     def polygon(self, xs: Sequence[float], ys: Sequence[float], color: Color) -> None:
         """A filled simple polygon (even-odd rule)."""
         pts = np.array([self.to_pixels(x, y) for x, y in zip(xs, ys, strict=True)])
@@ -123,4 +133,11 @@ class Canvas:
 
 
 def _span(lo: float, hi: float, limit: int) -> tuple[int, int]:
+    """The pixel range ``[lo, hi]`` covers on an axis of ``limit`` pixels, cut to the
+    canvas; empty when either end is NaN (``inf`` ends are cut like any other)."""
+    if not (lo <= hi):                         # NaN (or an empty range): nothing to draw
+        return 0, 0
+    lo, hi = max(lo, -1.0), min(hi, limit + 1.0)
+    if lo > hi:                                # entirely off the canvas
+        return 0, 0
     return max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, limit)

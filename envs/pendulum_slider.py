@@ -188,6 +188,8 @@ class PendulumSliderEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     #: default FIR window (20 ms at 1 kHz)
     default_horizon: ClassVar[int] = 20
+    #: MuJoCo's ``mjMAXVAL``: beyond it MuJoCo resets its simulation at the next step
+    state_limit: ClassVar[float] = 1e10
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
 
     def __init__(
@@ -335,9 +337,8 @@ class PendulumSliderEnv(PlantEnv):
             self._stage_rk4.step(self.params["frame_skip"])
         failure = reset_warning(d)
         if failure is not None:
-            # MuJoCo found a NaN or a value beyond 1e10 and reset the data: the step
-            # failed. Restore the state it started from; the base class ends the episode.
-            self._write_state(x)
+            # MuJoCo found a NaN or a value beyond 1e10 and reset its data: the step failed
+            # (the base class ends the episode and restores ``x``, see _restore)
             return x.copy(), {"force": force, "simulation_failure": failure}
         x_next = self._read_state()
         if self._has_process_noise:
@@ -345,6 +346,9 @@ class PendulumSliderEnv(PlantEnv):
             self._write_state(x_next)
             d.ctrl[0] = force
         return x_next, {"force": force}
+
+    def _restore(self, x: FloatArray) -> None:
+        self._write_state(x)
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return x.copy()

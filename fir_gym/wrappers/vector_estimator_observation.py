@@ -14,7 +14,15 @@ from numpy.typing import NDArray
 from fir_gym.estimators import Estimator
 from fir_gym.estimators._validation import one_of
 
-from .estimator_observation import OBSERVATION_KINDS, build_estimator, estimator_class_of
+from .estimator_observation import (
+    OBSERVATION_KINDS,
+    build_estimator,
+    check_fits,
+    estimator_class_of,
+    plant_dimensions,
+    plant_name,
+    state_size,
+)
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -53,6 +61,11 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
                             "builds one batched estimator); got an instance")
         cls = estimator_class_of(estimator)
         self.estimator = build_estimator(cls, lambda name: _plant_attr(env, name), options)
+        check_fits(self.estimator, plant_dimensions(lambda name: _plant_attr(env, name),
+                                                    env.single_observation_space,
+                                                    env.single_action_space),
+                   plant_name(env))
+        self._n_state = state_size(self.estimator.model)
         self.observation_kind = observation
         n = self.num_envs
         n_x = self.estimator.model.n_x
@@ -107,9 +120,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         info["estimate"], info["_estimate"] = x_hat.copy(), everyone
         if "state" in info:
             mask = info.get("_state", everyone)
-            error = np.asarray(info["state"]) - x_hat
+            error = np.asarray(info["state"]) - x_hat[:, :self._n_state]
+            # Gymnasium's convention: entries outside the mask are zeros (never NaN)
             info["estimation_error"] = error if mask.all() else np.where(mask[:, None], error,
-                                                                         np.nan)
+                                                                         0.0)
             info["_estimation_error"] = mask
         diverged = self.estimator.diverged                # a fresh array (or a bool)
         info["estimator_diverged"] = diverged if isinstance(diverged, np.ndarray) else \
