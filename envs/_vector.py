@@ -101,15 +101,16 @@ class PlantVectorEnv(VectorEnv):
         x = self.states
         plant = self.plant
         x_next, extra = plant._transition(x, A, self.steps, self.np_random)
-        reward = np.broadcast_to(np.asarray(plant._reward(x, A, x_next), dtype=np.float64),
+        valid = valid_states(x_next, plant.state_limit)
+        # a failed sub-env stays at its state: never measure or reward an invalid one
+        safe = x_next if valid.all() else np.where(valid[:, None], x_next, x)
+        reward = np.broadcast_to(np.asarray(plant._reward(x, A, safe), dtype=np.float64),
                                  (self.num_envs,)).copy()
         terminated = ~np.asarray(plant._in_domain(x_next), dtype=bool)
         self.steps += 1
         truncated = (self.steps >= self.max_episode_steps if self.max_episode_steps
                      else np.zeros(self.num_envs, dtype=bool))
-        valid = valid_states(x_next, plant.state_limit)
-        safe = x_next if valid.all() else np.where(valid[:, None], x_next, x)
-        obs = plant._measure(safe, extra, self.np_random)   # never of a non-finite state
+        obs = plant._measure(safe, extra, self.np_random)
         done = self.prev_done
         failure = self._failures(x_next, valid, reward, obs, done)
         masks: dict[str, np.ndarray] = {}
