@@ -29,6 +29,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import mujoco
+import numpy as np
+from numpy.typing import NDArray
 
 #: ``law(q0, q1, v0, v1, a0, a1) -> (a0, a1)``: a stage's accelerations with the force
 #: applied, from the stage's positions, velocities and MuJoCo's accelerations without it
@@ -39,18 +41,17 @@ RESET_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BAD
                   mujoco.mjtWarning.mjWARN_BADQACC)
 
 
-def reset_warning(d: mujoco.MjData) -> str | None:
-    """The name of the first of :data:`RESET_WARNINGS` counted in ``d``, else ``None``.
+def reset_warning(counts: NDArray[np.int32]) -> str | None:
+    """The name of the first of :data:`RESET_WARNINGS` counted, else ``None``.
 
-    These are the warnings after which MuJoCo resets the simulation (``mj_resetData``)
-    and carries on from the model's reference state; the counters are cleared by
-    ``mj_resetData``.
+    ``counts`` is ``d.warning.number`` (a live view: take it once). These are the
+    warnings after which MuJoCo resets the simulation (``mj_resetData``) and carries on
+    from the model's reference state; ``mj_resetData`` clears the counters.
     """
-    counts = d.warning.number
-    for warning in RESET_WARNINGS:
-        if counts[warning]:
-            return str(warning.name)
-    return None
+    q, v, a = RESET_WARNINGS
+    if not (counts.item(q) or counts.item(v) or counts.item(a)):     # the common case
+        return None
+    return next(str(w.name) for w in RESET_WARNINGS if counts.item(w))
 
 
 class StageRK4:
@@ -68,22 +69,25 @@ class StageRK4:
             raise ValueError("StageRK4 reproduces MuJoCo's RK4; the model's integrator is "
                              f"{mujoco.mjtIntegrator(m.opt.integrator).name}")
         self.m, self.d, self.law = m, d, law
+        qpos, qvel, qacc = d.qpos, d.qvel, d.qacc          # views, taken once
+        forward_skip, no_skip = mujoco.mj_forwardSkip, int(mujoco.mjtStage.mjSTAGE_NONE)
+
+        def stage(x: float, th: float, v: float, w: float, t: float) -> tuple[float, float]:
+            """The accelerations at one stage (MuJoCo's, then the law's)."""
+            qpos[0], qpos[1], qvel[0], qvel[1] = x, th, v, w
+            d.time = t
+            forward_skip(m, d, no_skip, 1)                  # 1: skip the sensors
+            a0, a1 = qacc.tolist()
+            return law(x, th, v, w, a0, a1)
+        self._stage = stage
 
     def step(self, nstep: int = 1) -> None:
         """``nstep`` RK4 steps (``mj_RungeKutta`` with ``A = [½; 0 ½; 0 0 1]``,
         ``b = [⅙ ⅓ ⅓ ⅙]``, after MuJoCo's checks, as in ``mj_step``)."""
-        m, d, law = self.m, self.d, self.law
+        m, d, law, stage = self.m, self.d, self.law, self._stage
         h = m.opt.timestep
         qpos, qvel, qacc = d.qpos, d.qvel, d.qacc
         b0, b1 = 1.0 / 6.0, 1.0 / 3.0
-
-        def stage(x: float, th: float, v: float, w: float, t: float) -> tuple[float, float]:
-            qpos[0], qpos[1], qvel[0], qvel[1] = x, th, v, w
-            d.time = t
-            mujoco.mj_forwardSkip(m, d, mujoco.mjtStage.mjSTAGE_NONE, 1)   # no sensors
-            a0, a1 = qacc.tolist()
-            return law(x, th, v, w, a0, a1)
-
         for _ in range(nstep):
             mujoco.mj_checkPos(m, d)
             mujoco.mj_checkVel(m, d)

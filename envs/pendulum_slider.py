@@ -291,6 +291,7 @@ class PendulumSliderEnv(PlantEnv):
         # views into mj_data, read at every step (a view per attribute access costs more)
         self._qpos_view, self._qvel_view = self.mj_data.qpos, self.mj_data.qvel
         self._ctrl_view = self.mj_data.ctrl
+        self._warning_counts = self.mj_data.warning.number
         self._renderer: mujoco.Renderer | None = None
 
     def _settle_vertical(self) -> float:
@@ -335,7 +336,7 @@ class PendulumSliderEnv(PlantEnv):
             mujoco.mj_step(self.mj_model, d, self.params["frame_skip"])
         else:
             self._stage_rk4.step(self.params["frame_skip"])
-        failure = reset_warning(d)
+        failure = reset_warning(self._warning_counts)
         if failure is not None:
             # MuJoCo found a NaN or a value beyond 1e10 and reset its data: the step failed
             # (the base class ends the episode and restores ``x``, see _restore)
