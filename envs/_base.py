@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar, SupportsFloat
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -85,10 +85,11 @@ SIMULATION_FAILURES: dict[str, str] = {
 RESET_OPTIONS = ("state",)
 
 
-class PlantEnv(gym.Env[FloatArray, FloatArray]):
+class PlantEnv(gym.Env[FloatArray, NDArray[np.float32]]):
     """Base class of the paper plants; see the module docstring for the shared rules."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
+    # (gymnasium declares ``metadata`` an instance attribute: not a ClassVar, hence RUF012)
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}  # noqa: RUF012
 
     #: names of the state components, in order (set by each plant)
     state_names: ClassVar[tuple[str, ...]] = ()
@@ -219,9 +220,9 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[FloatArray, dict[str, Any]]:
-        options = reset_options(options, RESET_OPTIONS)
-        state = self._check_state("options['state']", options["state"]) \
-            if "state" in options else None
+        given = reset_options(options, RESET_OPTIONS)
+        state = self._check_state("options['state']", given["state"]) \
+            if "state" in given else None
         super().reset(seed=seed)
         self.state = self._sample_initial_state(self.np_random) if state is None else state
         self.time_step = 0
@@ -231,7 +232,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
 
     def step(
         self, action: ArrayLike
-    ) -> tuple[FloatArray, SupportsFloat, bool, bool, dict[str, Any]]:
+    ) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
         a, clipped = self._check_action(action)
         x = self.state
         x_next, extra = self._transition(x, a, self.time_step, self.np_random)
@@ -314,7 +315,7 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         return x
 
     def _check_action(self, action: ArrayLike) -> tuple[FloatArray, bool]:
-        shape = self.action_space.shape
+        shape = self.action_space.shape or ()
         if shape == (1,) and type(action) is np.ndarray and action.shape == shape \
                 and action.dtype.kind == "f":
             # the common case, in floats: same checks, same result as below

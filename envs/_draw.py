@@ -12,11 +12,14 @@ cut at its edge, so drawing never fails on the numbers it is given.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 Color = tuple[int, int, int]
+#: world coordinates of several points along one axis
+Points = Sequence[float] | NDArray[np.floating[Any]]
 
 BACKGROUND: Color = (250, 250, 247)
 INK: Color = (40, 40, 48)
@@ -94,8 +97,7 @@ class Canvas:
         ey = py - (p0[1] + t * d[1])
         self.image[r0:r1, c0:c1][ex * ex + ey * ey <= h * h] = color
 
-    def polyline(self, xs: Sequence[float], ys: Sequence[float], color: Color,
-                 width: float = 1.5) -> None:
+    def polyline(self, xs: Points, ys: Points, color: Color, width: float = 1.5) -> None:
         for i in range(len(xs) - 1):
             self.line(xs[i], ys[i], xs[i + 1], ys[i + 1], color, width)
 
@@ -113,7 +115,7 @@ class Canvas:
         image[:width], image[-width:] = color, color
         image[:, :width], image[:, -width:] = color, color
 
-    def polygon(self, xs: Sequence[float], ys: Sequence[float], color: Color) -> None:
+    def polygon(self, xs: Points, ys: Points, color: Color) -> None:
         """A filled simple polygon (even-odd rule)."""
         pts = np.array([self.to_pixels(x, y) for x, y in zip(xs, ys, strict=True)])
         c0, c1 = _span(pts[:, 0].min(), pts[:, 0].max(), self.width)

@@ -27,7 +27,7 @@ are masked out (0, with their ``_key`` mask off).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -43,7 +43,7 @@ FloatArray = NDArray[np.float64]
 class PlantVectorEnv(VectorEnv):
     """``num_envs`` copies of ``plant_class(**kwargs)`` stepped as one batch."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": [],
+    metadata = {"render_modes": [],  # noqa: RUF012
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(
@@ -84,8 +84,8 @@ class PlantVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[FloatArray, dict[str, Any]]:
-        options = reset_options(options, RESET_OPTIONS)
-        states = self._check_states(options["state"]) if "state" in options else None
+        given = reset_options(options, RESET_OPTIONS)
+        states = self._check_states(given["state"]) if "state" in given else None
         super().reset(seed=seed)
         self.states = self.plant._sample_initial_state(self.np_random, self.num_envs) \
             if states is None else states

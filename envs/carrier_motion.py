@@ -126,7 +126,7 @@ class CarrierMotionEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("compensator_offset",)
     #: default FIR window (5 s: a long window against the heavy measurement noise)
     default_horizon: ClassVar[int] = 50
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
 
     def __init__(
         self,

@@ -190,7 +190,7 @@ class PendulumSliderEnv(PlantEnv):
     default_horizon: ClassVar[int] = 20
     #: MuJoCo's ``mjMAXVAL``: beyond it MuJoCo resets its simulation at the next step
     state_limit: ClassVar[float] = 1e10
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100}  # noqa: RUF012
 
     def __init__(
         self,

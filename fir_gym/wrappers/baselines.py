@@ -32,10 +32,13 @@ class TrueStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.Wrapper.__init__(self, env)
         names, model = getattr(env.unwrapped, "state_names", ()), getattr(env.unwrapped,
                                                                         "model", None)
-        if not names and model is None:
+        if names:
+            n_x = len(names)
+        elif model is not None:
+            n_x = int(model.n_x)
+        else:
             raise TypeError("TrueStateObservation needs a plant that names its state "
                             "(state_names) or publishes a model")
-        n_x = len(names) if names else int(model.n_x)
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
         self._last = np.zeros(n_x)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -232,7 +232,8 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            return {"estimate": x_hat, "covariance": self.estimator.P[self._triu]}
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
+            return {"estimate": x_hat, "covariance": P[self._triu]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
     def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:

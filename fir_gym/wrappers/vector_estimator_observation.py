@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -88,7 +88,8 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        y, info = self.env.reset(seed=seed, options=options)
+        env: Any = self.env                    # its reset takes a list of seeds too
+        y, info = env.reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
         self._prev_done[:] = False
@@ -110,7 +111,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            P = self.estimator.P
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
             return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
@@ -138,7 +139,8 @@ def _plant_attr(env: VectorEnv, name: str) -> Any:
     plant = getattr(base, "plant", None)                 # fir-gym's native vector env
     if plant is not None:
         return getattr(plant, name, None)
+    get_attr = getattr(base, "get_attr", None)          # sync / async: from sub-env 0
     try:
-        return base.get_attr(name)[0]                   # sync / async: from sub-env 0
+        return None if get_attr is None else get_attr(name)[0]
     except AttributeError:
         return None
