@@ -303,6 +303,7 @@ class PlantEnv(gym.Env[FloatArray, NDArray[np.float32]]):
         """``value`` as a state of this plant: ``n_x`` real numbers, valid, in the domain."""
         names = self.state_names
         x = real_array(name, value, f"{len(names)} real numbers (the state {list(names)})")
+        x = x.copy() if x is value else x                 # the plant keeps it
         if x.shape != (len(names),):
             raise ValueError(f"{name} must have shape ({len(names)},) (the state "
                              f"{list(names)}); got shape {x.shape}")
@@ -324,7 +325,8 @@ class PlantEnv(gym.Env[FloatArray, NDArray[np.float32]]):
                 raise ValueError(f"action must be finite; got {action.astype(np.float64)}")
             c = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
             return np.array((c,)), c != v
-        a = real_array("action", action, f"{shape[0]} real number(s) in [-1, 1] (shape {shape})")
+        a = real_array("action", action,
+                       lambda: f"{shape[0]} real number(s) in [-1, 1] (shape {shape})")
         if a.shape != shape:
             if a.size == 1 and shape == (1,) and a.ndim <= 1:
                 a = a.reshape(1)

@@ -15,7 +15,7 @@ The single plants (:class:`~fir_gym.envs._base.PlantEnv`) and the native vector 
 from __future__ import annotations
 
 import reprlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -37,24 +37,32 @@ def describe(value: Any) -> str:
     return f"{type(value).__name__} {_short.repr(value)}"
 
 
-def real_array(name: str, value: Any, expected: str) -> FloatArray:
+def real_array(name: str, value: Any, expected: str | Callable[[], str]) -> FloatArray:
     """``value`` as a float64 array if it holds real numbers, else ``ValueError``.
 
     ``expected`` completes "``name`` must be ..." in the message (e.g. "1 real number
-    in [-1, 1]"). The result is a fresh array (never a view of ``value``).
+    in [-1, 1]"; a callable is called only for the message). The result is ``value``
+    itself when that is a float64 array (copy it before keeping it), else a new array.
     """
     if isinstance(value, (str, bytes)):          # numpy would make a string array
-        raise ValueError(f"{name} must be {expected}; got {describe(value)}")
+        raise _refused(name, value, expected)
     try:
         arr = value if isinstance(value, np.ndarray) else np.asarray(value)
     except (TypeError, ValueError):               # ragged lists and the like
-        raise ValueError(f"{name} must be {expected}; got {describe(value)}") from None
+        raise _refused(name, value, expected) from None
     if arr.dtype.kind not in REAL_KINDS:
         what = {"b": "booleans", "c": "complex numbers", "M": "dates", "m": "time deltas",
                 "U": "strings", "S": "bytes", "O": "Python objects"}.get(arr.dtype.kind,
                                                                          "not numbers")
-        raise ValueError(f"{name} must be {expected}; got {what} ({describe(value)})")
-    return np.array(arr, dtype=np.float64)
+        raise _refused(name, value, expected, what)
+    return arr if arr.dtype == np.float64 else arr.astype(np.float64)
+
+
+def _refused(name: str, value: Any, expected: str | Callable[[], str],
+             what: str | None = None) -> ValueError:
+    want = expected if isinstance(expected, str) else expected()
+    got = describe(value) if what is None else f"{what} ({describe(value)})"
+    return ValueError(f"{name} must be {want}; got {got}")
 
 
 def reset_options(options: Any, known: tuple[str, ...]) -> Mapping[str, Any]:

@@ -164,7 +164,7 @@ class PlantVectorEnv(VectorEnv):
     def _check_actions(self, actions: ArrayLike) -> FloatArray:
         shape = self.action_space.shape
         A = actions if type(actions) is np.ndarray and actions.dtype.kind == "f" else \
-            real_array("actions", actions, f"real numbers in [-1, 1] of shape {shape}")
+            real_array("actions", actions, lambda: f"real numbers in [-1, 1] of shape {shape}")
         if A.shape != shape:
             raise ValueError(f"actions must have shape {shape}; got shape {A.shape}")
         if not np.all(np.isfinite(A)):
@@ -176,6 +176,8 @@ class PlantVectorEnv(VectorEnv):
         n, names = self.num_envs, self.plant.state_names
         X = real_array("options['state']", value,
                        f"real numbers of shape ({len(names)},) or ({n}, {len(names)})")
+        if X is value:                                     # the vector env keeps it
+            X = X.copy()
         if X.shape == (len(names),):
             X = np.tile(X, (n, 1))
         elif X.shape != (n, len(names)):

@@ -132,3 +132,16 @@ def test_vector_env_resets_to_given_states():
         venv.reset(seed=0, options={"state": [[8.0, 2.0], [0.5, 0.0], [8.0, 2.0]]})
     with pytest.raises(ValueError, match=r"options\['state'\] must have shape"):
         venv.reset(seed=0, options={"state": np.zeros((2, 2))})
+
+
+def test_a_given_state_is_copied_not_kept_by_reference():
+    env = gym.make("fir_gym/Orbit-v0").unwrapped
+    x0 = np.array([8.0, 2.0])
+    env.reset(seed=0, options={"state": x0})
+    x0[:] = 50.0
+    np.testing.assert_array_equal(env.state, [8.0, 2.0])
+    venv = make_vector("fir_gym/Orbit-v0")
+    each = np.array([[8.0, 2.0], [9.0, 1.0], [7.5, 0.0]])
+    venv.reset(seed=0, options={"state": each})
+    each[:] = 50.0
+    assert np.all(venv.unwrapped.states < 50.0)
