@@ -2,7 +2,7 @@
 
 Every public constructor, ``reset`` and ``step`` in this package validates its
 inputs here, so a bad argument fails at the boundary with a message that names
-the argument and says what was expected (ARCHITECTURE.md, "Names and style").
+the argument and says what was expected (docs/architecture.md#validation).
 """
 
 from __future__ import annotations

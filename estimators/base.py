@@ -1,4 +1,4 @@
-"""The Estimator contract shared by every filter (ARCHITECTURE.md, "The two contracts").
+"""The Estimator contract shared by every filter (docs/architecture.md#estimator-contract).
 
 An estimator is one object per filter, batched by design:
 
