@@ -78,11 +78,13 @@ def test_envs_stepped_in_threads_give_exactly_their_solo_trajectories():
 
 @pytest.mark.parametrize("friction", FRICTIONS)
 @pytest.mark.parametrize("frame_skip", [1, 3])
-def test_mujoco_reset_warning_ends_the_episode_with_a_flag(friction, frame_skip):
+def test_mujoco_reset_warning_ends_the_episode_with_a_flag(friction, frame_skip, tmp_path,
+                                                         monkeypatch):
     """A state whose accelerations MuJoCo finds too large (mjWARN_BADQACC: θ̇ = 1e6 at
     θ = π/2, a centripetal acceleration ~1e11) makes MuJoCo reset its data. The env
     says so and ends the episode at the state it started from, instead of carrying on
     from MuJoCo's reset state."""
+    monkeypatch.chdir(tmp_path)                 # MuJoCo appends its warning to MUJOCO_LOG.TXT
     env = make(friction, 0, frame_skip=frame_skip)
     start = [0.0108, 0.0, np.pi / 2, 1e6]
     obs0, _ = env.reset(seed=0, options={"state": start})
@@ -99,9 +101,11 @@ def test_mujoco_reset_warning_ends_the_episode_with_a_flag(friction, frame_skip)
 
 
 @pytest.mark.parametrize("friction", FRICTIONS)
-def test_the_issue_state_that_mujoco_reset_silently_ends_the_episode(friction):
+def test_the_issue_state_that_mujoco_reset_silently_ends_the_episode(friction, tmp_path,
+                                                                    monkeypatch):
     """Issue 18's reproducer: θ̇ = 1e7 at rest. The RK4 step blows up (the stages
     overflow to ~1e26); the episode ends with a flag, at the start state."""
+    monkeypatch.chdir(tmp_path)                 # MuJoCo may log a warning to MUJOCO_LOG.TXT
     env = make(friction, 0)
     start = [0.0108, 0.0, 0.0, 1e7]
     env.reset(seed=0, options={"state": start})
