@@ -74,6 +74,13 @@ def test_true_state_observation_guards_an_env_that_reports_nan():
     np.testing.assert_array_equal(obs, [3.0, 4.0])
     assert terminated and info["simulation_failure"] == "nonfinite_state"
 
+    class BrokenStart(Broken):
+        def reset(self, *, seed=None, options=None):
+            return np.zeros(1), {"state": np.array([np.inf, 0.0])}
+
+    with pytest.raises(ValueError, match="reset returned a state that is not finite"):
+        TrueStateObservation(BrokenStart()).reset()
+
 
 def test_estimator_in_the_loop_sees_finite_measurements_when_the_plant_fails():
     env = EstimatorObservation(gym.make("fir_gym/VanDerPol-v0", Q=1e300), "ekf")
