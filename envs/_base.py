@@ -243,10 +243,9 @@ class PlantEnv(gym.Env[FloatArray, NDArray[np.float32]]):
             reward = float(self._reward(x, a, x_next))
             obs = self._measure(x_next, extra, self.np_random)
             # a finite sum means every entry is finite (the exact test only when it is not)
-            if not (math.isfinite(reward) and (math.isfinite(sum(obs.tolist()))
-                                               or np.isfinite(obs).all())):
-                failure = "nonfinite_reward" if not math.isfinite(reward) else \
-                    "nonfinite_observation"
+            if not math.isfinite(reward + sum(obs.tolist())):
+                failure = ("nonfinite_reward" if not math.isfinite(reward) else
+                           None if np.isfinite(obs).all() else "nonfinite_observation")
         if failure is not None:
             return self._failed_step(x, a, clipped, extra, failure)
         self.state = x_next
