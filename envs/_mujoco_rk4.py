@@ -39,6 +39,7 @@ StageLaw = Callable[[float, float, float, float, float, float], tuple[float, flo
 #: the MuJoCo warnings after which its step resets the data (``mj_checkPos`` and friends)
 RESET_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                   mujoco.mjtWarning.mjWARN_BADQACC)
+_RESET_INDICES = tuple(int(w) for w in RESET_WARNINGS)
 
 
 def reset_warning(counts: NDArray[np.int32]) -> str | None:
@@ -48,10 +49,11 @@ def reset_warning(counts: NDArray[np.int32]) -> str | None:
     warnings after which MuJoCo resets the simulation (``mj_resetData``) and carries on
     from the model's reference state; ``mj_resetData`` clears the counters.
     """
-    q, v, a = RESET_WARNINGS
-    if not (counts.item(q) or counts.item(v) or counts.item(a)):     # the common case
+    numbers = counts.tolist()                     # one read; plain-int indices below
+    q, v, a = _RESET_INDICES
+    if not (numbers[q] or numbers[v] or numbers[a]):                 # the common case
         return None
-    return next(str(w.name) for w in RESET_WARNINGS if counts.item(w))
+    return next(str(w.name) for w in RESET_WARNINGS if numbers[int(w)])
 
 
 class StageRK4:
