@@ -33,13 +33,13 @@ class does what must be identical everywhere:
   refused with a ``ValueError`` naming ``options['state']``, not accepted and
   terminated at the first step.
 * **Nothing non-finite leaves a plant.** A step whose simulation fails — the new
-  state is NaN or inf (``"nonfinite_state"``) or has a component beyond
-  the plant's ``±state_limit`` (``"state_overflow"``; :data:`STATE_LIMIT` = 1e150,
-  MuJoCo's 1e10 for the MuJoCo plant), its
-  measurement or reward is not finite (``"nonfinite_observation"``,
-  ``"nonfinite_reward"``), or MuJoCo reset its simulation (``"mjWARN_BADQPOS"``,
-  ``"mjWARN_BADQVEL"``, ``"mjWARN_BADQACC"``) — ends the episode
-  (``terminated=True``) with ``info["simulation_failure"]`` naming the cause. The
+  state is NaN or inf (``"nonfinite_state"``) or has a component beyond the plant's
+  ``±state_limit`` (``"state_overflow"``; :data:`STATE_LIMIT` = 1e150, MuJoCo's 1e10
+  for the MuJoCo plant), its measurement or reward is not finite
+  (``"nonfinite_observation"``, ``"nonfinite_reward"``), or MuJoCo reset its
+  simulation (``"mjWARN_BADQPOS"``, ``"mjWARN_BADQVEL"``, ``"mjWARN_BADQACC"``) —
+  ends the episode (``terminated=True``) with ``info["simulation_failure"]`` naming
+  the cause (:data:`SIMULATION_FAILURES`). The
   plant then stays at the last valid state (``info["state"]`` and :attr:`state`),
   the observation repeats the last one, the reward is that of staying at the last
   valid state under the action, and per-step extras that are not finite are left
