@@ -3,16 +3,23 @@
 Pure numpy, no display and no extra dependency: filled circles, thick line
 segments, rectangles and polylines, anti-aliasing-free. World coordinates are
 mapped to pixels by :meth:`Canvas.set_view` (y up).
+
+Any coordinate may be NaN, infinite or huge (a plant drawn at a broken state): a
+shape whose pixel box is not finite is not drawn, one that reaches off the canvas is
+cut at its edge, so drawing never fails on the numbers it is given.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 Color = tuple[int, int, int]
+#: world coordinates of several points along one axis
+Points = Sequence[float] | NDArray[np.floating[Any]]
 
 BACKGROUND: Color = (250, 250, 247)
 INK: Color = (40, 40, 48)
@@ -94,8 +101,7 @@ class Canvas:
         ey = py - (p0[1] + t * d[1])
         self.image[r0:r1, c0:c1][ex * ex + ey * ey <= h * h] = color
 
-    def polyline(self, xs: Sequence[float], ys: Sequence[float], color: Color,
-                 width: float = 1.5) -> None:
+    def polyline(self, xs: Points, ys: Points, color: Color, width: float = 1.5) -> None:
         for i in range(len(xs) - 1):
             self.line(xs[i], ys[i], xs[i + 1], ys[i + 1], color, width)
 
@@ -107,7 +113,13 @@ class Canvas:
         if c0 < c1 and r0 < r1:
             self.image[r0:r1, c0:c1] = color
 
-    def polygon(self, xs: Sequence[float], ys: Sequence[float], color: Color) -> None:
+    def frame(self, color: Color, width: int = 6) -> None:
+        """A border of ``width`` pixels around the whole canvas."""
+        image = self.image
+        image[:width], image[-width:] = color, color
+        image[:, :width], image[:, -width:] = color, color
+
+    def polygon(self, xs: Points, ys: Points, color: Color) -> None:
         """A filled simple polygon (even-odd rule)."""
         pts = np.array([self.to_pixels(x, y) for x, y in zip(xs, ys, strict=True)])
         c0, c1 = _span(pts[:, 0].min(), pts[:, 0].max(), self.width)
@@ -163,4 +175,11 @@ class Canvas:
 
 
 def _span(lo: float, hi: float, limit: int) -> tuple[int, int]:
+    """The pixel range ``[lo, hi]`` covers on an axis of ``limit`` pixels, cut to the
+    canvas; empty when either end is NaN (``inf`` ends are cut like any other)."""
+    if not (lo <= hi):                         # NaN (or an empty range): nothing to draw
+        return 0, 0
+    lo, hi = max(lo, -1.0), min(hi, limit + 1.0)
+    if lo > hi:                                # entirely off the canvas
+        return 0, 0
     return max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, limit)

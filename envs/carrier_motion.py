@@ -129,7 +129,7 @@ class CarrierMotionEnv(PlantEnv):
     #: the legend's name and mark for what the drawing shows of the true state
     truth_label: ClassVar[str] = "truth (deck)"
     truth_color: ClassVar[tuple[int, int, int]] = _draw.GREY
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
 
     def __init__(
         self,

@@ -151,7 +151,7 @@ class UncertainOscillatorEnv(PlantEnv):
     state_names: ClassVar[tuple[str, ...]] = ("x1", "x2", "x3")
     measurement_names: ClassVar[tuple[str, ...]] = ("x1_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("force",)
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
 
     def __init__(
         self,

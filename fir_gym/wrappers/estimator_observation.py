@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -68,16 +68,69 @@ def resolve_estimator(
     """An estimator instance for ``env`` from an instance, a class or a registry name.
 
     Classes and names are built by :func:`build_estimator` from ``env.unwrapped``; an
-    instance is used as it is (``options`` must then be empty).
+    instance is used as it is (``options`` must then be empty), and must be one system
+    whose model fits the plant (:func:`check_fits`).
     """
+    plant = env.unwrapped
     if isinstance(estimator, Estimator):
         if options:
             raise ValueError(f"estimator options {sorted(options)} given with an estimator "
                              "instance; configure the instance instead")
-        return estimator
-    plant = env.unwrapped
-    return build_estimator(estimator_class_of(estimator),
-                           lambda name: getattr(plant, name, None), options)
+        if estimator.x.ndim != 1:
+            raise ValueError(f"estimator {type(estimator).__name__} runs a batch of "
+                             f"{estimator.x.shape[0]} systems; EstimatorObservation feeds one "
+                             "(use VectorEstimatorObservation for a vector env)")
+        built = estimator
+    else:
+        built = build_estimator(estimator_class_of(estimator),
+                                lambda name: getattr(plant, name, None), options)
+    check_fits(built, plant_dimensions(lambda name: getattr(plant, name, None),
+                                       env.observation_space, env.action_space),
+               plant_name(env))
+    return built
+
+
+def plant_dimensions(plant_attr: Callable[[str], Any], observation_space: Any,
+                     action_space: Any) -> dict[str, int]:
+    """The plant's ``n_x`` (its state names, else its model's), ``n_y`` and ``n_u`` (its
+    spaces, where they are flat boxes): what an estimator's model must have."""
+    dims: dict[str, int] = {}
+    names, model = plant_attr("state_names"), plant_attr("model")
+    if names:
+        dims["n_x"] = len(names)
+    elif model is not None:
+        dims["n_x"] = int(model.n_x)
+    for key, space in (("n_y", observation_space), ("n_u", action_space)):
+        if isinstance(space, spaces.Box) and len(space.shape) == 1:
+            dims[key] = int(space.shape[0])
+    return dims
+
+
+def check_fits(estimator: Estimator, dims: dict[str, int], plant: str) -> None:
+    """Refuse an estimator whose model's ``n_x``, ``n_y`` or ``n_u`` is not the plant's.
+
+    The state of an augmented model (:func:`~fir_gym.estimators.augment`) is the plant's
+    state followed by parameters: its ``n_base`` must be the plant's ``n_x``.
+    """
+    model = estimator.model
+    ours = {"n_x": state_size(model), "n_y": int(model.n_y), "n_u": int(model.n_u)}
+    wrong = [f"{key}={ours[key]} where the plant has {key}={want}"
+             for key, want in dims.items() if ours[key] != want]
+    if wrong:
+        raise ValueError(f"estimator {type(estimator).__name__} does not fit {plant}: its model "
+                         f"{model.name!r} has {'; '.join(wrong)}")
+
+
+def state_size(model: Any) -> int:
+    """How many leading components of the model's state are the plant's state (all of
+    them, except for an augmented model, whose parameters follow its ``n_base``)."""
+    return int(getattr(model, "n_base", model.n_x))
+
+
+def plant_name(env: Any) -> str:
+    """The id an env (or vector env) was made with, else its class name (for messages)."""
+    spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
+    return spec.id if spec is not None else type(env.unwrapped).__name__
 
 
 def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -160,6 +213,7 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._last_estimate: NDArray[np.float64] | None = None
         self._last_measurement: NDArray[np.float64] | None = None
         n_x = self.estimator.model.n_x
+        self._n_state = state_size(self.estimator.model)     # the plant's part of x_hat
         estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
         if observation == "estimate":
             self.observation_space = estimate
@@ -218,14 +272,15 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            return {"estimate": x_hat, "covariance": self.estimator.P[self._triu]}
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
+            return {"estimate": x_hat, "covariance": P[self._triu]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
     def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:
         info = dict(info)
         info["estimate"] = x_hat.copy()
         if "state" in info:
-            info["estimation_error"] = np.asarray(info["state"]) - x_hat
+            info["estimation_error"] = np.asarray(info["state"]) - x_hat[:self._n_state]
         info["estimator_diverged"] = bool(self.estimator.diverged)
         info["estimator_info"] = dict(self.estimator.last_info)
         return info

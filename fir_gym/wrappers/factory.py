@@ -53,6 +53,8 @@ def make_plant(
     """
     creator = load_env_creator(plant) if isinstance(plant, str) else plant
     env = creator(**plant_kwargs)
+    if not isinstance(env, gym.Env):
+        raise TypeError(f"plant must build a gymnasium Env; {plant!r} built {type(env).__name__}")
     if estimator is None:
         if estimator_kwargs:
             raise ValueError("estimator_kwargs given without an estimator")
@@ -103,6 +105,7 @@ def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
     """A ``vector_entry_point`` for ``plant``: a :class:`~fir_gym.envs._vector.PlantVectorEnv`."""
 
     def make_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+        from fir_gym.envs._base import PlantEnv
         from fir_gym.envs._vector import PlantVectorEnv
 
         for key in ("estimator", "estimator_kwargs", "observation"):
@@ -110,7 +113,11 @@ def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
                 raise ValueError(f"{key} is not an option of the native vector env; wrap it in "
                                  "fir_gym.wrappers.VectorEstimatorObservation instead")
             kwargs.pop(key, None)
-        return PlantVectorEnv(load_env_creator(plant), num_envs=num_envs, **kwargs)
+        plant_class: Any = load_env_creator(plant)
+        if not (isinstance(plant_class, type) and issubclass(plant_class, PlantEnv)):
+            raise TypeError(f"the native vector env needs a fir-gym plant class; {plant!r} is "
+                            f"{plant_class!r}")
+        return PlantVectorEnv(plant_class, num_envs=num_envs, **kwargs)
 
     make_vector.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
     return make_vector

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -17,8 +17,12 @@ from fir_gym.estimators._validation import one_of
 from .estimator_observation import (
     OBSERVATION_KINDS,
     build_estimator,
+    check_fits,
     estimator_class_of,
     estimator_label,
+    plant_dimensions,
+    plant_name,
+    state_size,
 )
 
 
@@ -65,6 +69,11 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
                             "builds one batched estimator); got an instance")
         cls = estimator_class_of(estimator)
         self.estimator = build_estimator(cls, lambda name: _plant_attr(env, name), options)
+        check_fits(self.estimator, plant_dimensions(lambda name: _plant_attr(env, name),
+                                                    env.single_observation_space,
+                                                    env.single_action_space),
+                   plant_name(env))
+        self._n_state = state_size(self.estimator.model)
         self.observation_kind = observation
         n = self.num_envs
         n_x = self.estimator.model.n_x
@@ -89,7 +98,8 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        y, info = self.env.reset(seed=seed, options=options)
+        env: Any = self.env                    # its reset takes a list of seeds too
+        y, info = env.reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
         self._prev_done[:] = False
@@ -129,7 +139,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            P = self.estimator.P
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
             return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
@@ -139,9 +149,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         info["estimate"], info["_estimate"] = x_hat.copy(), everyone
         if "state" in info:
             mask = info.get("_state", everyone)
-            error = np.asarray(info["state"]) - x_hat
+            error = np.asarray(info["state"]) - x_hat[:, :self._n_state]
+            # Gymnasium's convention: entries outside the mask are zeros (never NaN)
             info["estimation_error"] = error if mask.all() else np.where(mask[:, None], error,
-                                                                         np.nan)
+                                                                         0.0)
             info["_estimation_error"] = mask
         diverged = self.estimator.diverged                # a fresh array (or a bool)
         info["estimator_diverged"] = diverged if isinstance(diverged, np.ndarray) else \
@@ -156,8 +167,9 @@ def _plant_attr(env: VectorEnv, name: str) -> Any:
     plant = getattr(base, "plant", None)                 # fir-gym's native vector env
     if plant is not None:
         return getattr(plant, name, None)
+    get_attr = getattr(base, "get_attr", None)          # sync / async: from sub-env 0
     try:
-        return base.get_attr(name)[0]                   # sync / async: from sub-env 0
+        return None if get_attr is None else get_attr(name)[0]
     except AttributeError:
         return None
 

@@ -113,3 +113,17 @@ def test_env_option_refuses_bad_input():
         gym.make("fir_gym/PendulumSlider-v0", dynamics="printed-eq7")
     with pytest.raises(ValueError, match="friction must be 'paper'"):
         gym.make("fir_gym/PendulumSlider-v0", dynamics="printed-eq15", friction="coulomb")
+
+
+def test_eq5_plant_ends_its_episode_rather_than_hand_on_a_runaway_state():
+    """Eq 5 creates energy: driven hard the slider leaves the rail — the episode terminates
+    (the plant's domain) with a finite state, and no non-finite value leaves the env."""
+    env = gym.make("fir_gym/PendulumSlider-v0", dynamics="printed-eq5",
+                   max_episode_steps=None).unwrapped
+    env.reset(seed=0, options={"state": [env.x_rest, 0.0, 0.5, 0.0]})
+    for k in range(20_000):
+        y, reward, terminated, _, info = env.step(np.array([np.sin(2 * np.pi * k * 1e-3)]))
+        assert np.isfinite(y).all() and np.isfinite(reward) and np.isfinite(info["state"]).all()
+        if terminated:
+            break
+    assert terminated
