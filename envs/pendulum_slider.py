@@ -13,9 +13,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
-from . import _mujoco_passive
 from ._base import PlantEnv, psd_sqrt, saturated_cost
-from .pendulum_slider_dynamics import FRICTION_MODES, PAPER_PARAMS, PendulumSliderDynamics
+from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
+from ._overlay import CameraView
+from .pendulum_slider_dynamics import (
+    EQUATIONS,
+    FRICTION_MODES,
+    PAPER_PARAMS,
+    PendulumSliderDynamics,
+)
 
 ASSET = Path(__file__).parent / "assets" / "pendulum_slider.xml"
 PAPER_R_STD = (0.003, 0.03, 0.03, 0.3)
@@ -30,70 +36,55 @@ class PaperFrictionForce:
     Eq (15) (with the errata of docs/papers.md#003-eq-15) adds to the slider the force
     ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
     force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
-    ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``
+    ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` MuJoCo's accelerations without ``F``), ``F = c₀ + c₁ θ̈``
     gives ``F = (c₀ + c₁ θ̈₀) / (1 - c₁ [M⁻¹]_θx)``.
 
-    The callback runs at each of MuJoCo's four RK4 stages, so it is kept to float
-    arithmetic on two ``tolist`` reads: the 2-DOF mass matrix
-    ``M = [[m1 + m2, −m2 l cosθ], [−m2 l cosθ, I_c + m2 l²]]`` and bias forces
-    ``[m2 l sinθ θ̇², m2 g l sinθ]`` (Coriolis/centripetal and gravity) are those of this
-    MJCF model in closed form, and ``q̈₀ = M⁻¹ (qfrc_passive + qfrc_applied + gear·ctrl −
-    bias)`` takes MuJoCo's own passive (spring, hinge damping), applied and actuator
-    forces. :meth:`reference_force` computes the same force from MuJoCo's own bias
+    :attr:`law` is that force as a :data:`~fir_gym.envs._mujoco_rk4.StageLaw`: from a
+    stage's state and MuJoCo's accelerations ``q̈₀`` (spring, hinge damping, gravity,
+    Coriolis, motor and applied forces, all MuJoCo's), the accelerations with ``F``. It
+    runs at each of the four RK4 stages, so it is float arithmetic with the 2-DOF mass
+    matrix of this MJCF model in closed form, ``M = [[m1 + m2, −m2 l cosθ], [−m2 l cosθ,
+    I_c + m2 l²]]``. :meth:`reference_force` computes ``F`` from MuJoCo's own bias
     forces (``mj_rne``) and mass-matrix solve (``mj_solveM``); the tests check that
-    the two agree to round-off.
+    MuJoCo's accelerations with that force applied are the law's to round-off.
     """
 
     def __init__(self, model: mujoco.MjModel, mu: float, m1: float, m2: float, l: float,
                  g: float, I_c: float) -> None:
         self.mu, self.weight, self.m2l = mu, (m1 + m2) * g, m2 * l
-        self.mt, self.J, self.m2gl = m1 + m2, I_c + m2 * l * l, m2 * g * l
+        self.mt, self.J = m1 + m2, I_c + m2 * l * l
         self.x_dof = int(model.jnt_dofadr[model.joint("x").id])
         self.th_dof = int(model.jnt_dofadr[model.joint("theta").id])
         self.th_qpos = int(model.jnt_qposadr[model.joint("theta").id])
         self.gear = float(model.actuator_gear[0, 0])
-        if model.nv != 2:
+        if model.nv != 2 or (self.x_dof, self.th_dof) != (0, 1):
             raise ValueError("PaperFrictionForce is for the 2-DOF pendulum slider")
         nv = model.nv
         self._bias = np.zeros(nv)
         self._rhs = np.zeros((2, nv))
         self._rhs[1, self.x_dof] = 1.0
         self._sol = np.zeros((2, nv))
-        #: the callback to install (a closure: cheaper for MuJoCo to call than this object)
-        self.callback = self._make_callback()
+        #: the stage law (a closure over the constants: it runs four times per step)
+        self.law = self._make_law()
 
-    def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        self.callback(m, d)
-
-    def _make_callback(self) -> Any:
-        """The force law as a closure over its constants (called at every RK4 stage: a few
-        reads of the binding's arrays, float arithmetic, one write)."""
-        xd, td, tq = self.x_dof, self.th_dof, self.th_qpos
-        m2l, m2gl, mt, J, gear = self.m2l, self.m2gl, self.mt, self.J, self.gear
+    def _make_law(self) -> StageLaw:
+        m2l, mt, J = self.m2l, self.mt, self.J
         mu, weight, sin, cos = self.mu, self.weight, math.sin, math.cos
-        cache: list[Any] = [None, ()]
 
-        def callback(m: mujoco.MjModel, d: mujoco.MjData) -> None:
-            if d is not cache[0]:                        # views of this MjData, made once
-                cache[0], cache[1] = d, (d.qpos, d.qvel, d.qfrc_passive, d.qfrc_applied,
-                                         d.ctrl)
-            qpos, qvel, qfrc_passive, qfrc_applied, ctrl = cache[1]
-            th, w = qpos.item(tq), qvel.item(td)
-            passive, applied = qfrc_passive.tolist(), qfrc_applied.tolist()
+        def law(x: float, th: float, v: float, w: float, ax: float, aw: float
+                ) -> tuple[float, float]:
             s, c = sin(th), cos(th)
-            tau_x = passive[xd] + applied[xd] + gear * ctrl.item(0) - m2l * s * w * w
-            tau_t = passive[td] + applied[td] - m2gl * s
             M12 = -m2l * c
             det = mt * J - M12 * M12
-            thdd0 = (mt * tau_t - M12 * tau_x) / det     # θ̈ without the friction force
-            minv_tx = -M12 / det                         # [M⁻¹]_θx
+            minv_tx = -M12 / det                         # [M⁻¹]_θx (= [M⁻¹]_xθ)
             c0 = -mu * (weight + m2l * c * w * w)
             c1 = -mu * m2l * s
-            qfrc_passive[xd] = passive[xd] + (c0 + c1 * thdd0) / (1.0 - c1 * minv_tx)
-        return callback
+            force = (c0 + c1 * aw) / (1.0 - c1 * minv_tx)
+            return ax + (J / det) * force, aw + minv_tx * force
+        return law
 
     def reference_force(self, m: mujoco.MjModel, d: mujoco.MjData) -> float:
-        """The same force from MuJoCo's ``mj_rne`` and ``mj_solveM`` (the callback's oracle)."""
+        """The same force from MuJoCo's ``mj_rne`` and ``mj_solveM`` (the law's oracle)."""
         mujoco.mj_rne(m, d, 0, self._bias)           # bias forces at this stage's state
         rhs = self._rhs[0]
         np.subtract(d.qfrc_passive, self._bias, out=rhs)
@@ -124,16 +115,29 @@ class PendulumSliderEnv(PlantEnv):
 
     * ``"paper"`` — eq (15)'s term ``-μ N`` with the true normal force ``N`` and no
       sign(ẋ): a constant push that moves the rest position from 25 mm to
-      10.8 mm. It is applied exactly at every RK4 stage by MuJoCo's passive-force
-      callback, installed only while this env steps (the callback is global to the
-      process and, left installed, would break model compilation everywhere; see
-      ``fir_gym.envs._mujoco_passive``), so the plant equals an RK4 integration of
-      the corrected ODE to round-off;
+      10.8 mm. It is applied exactly at every RK4 stage: the env runs MuJoCo's RK4
+      step itself with the force added to each stage's accelerations (no global
+      callback, so envs in several threads do not disturb each other; see
+      ``fir_gym.envs._mujoco_rk4``), and the plant equals an RK4 integration of the
+      corrected ODE to round-off;
     * ``"coulomb"`` — real dry friction: the slider rests on the rail (a vertical
       joint and a box-on-plane contact with friction μ, stiff ``solref``), so the
       friction is ``μ N sign(ẋ)`` with the true normal force and the slider sticks
       inside the band ``|2k (x - l0)| < μ N`` without creeping;
     * ``"none"``.
+
+    Equations of motion (``dynamics``):
+
+    * ``"physical"`` (default) — the Lagrangian's, simulated by MuJoCo as above;
+    * ``"printed-eq15"``, ``"printed-eq5"`` — paper 003's printed eq (15) or eq (5)
+      (:mod:`fir_gym.envs.pendulum_slider_dynamics` gives their errata: the wrong
+      centripetal sign, ``m1 l²`` for ``m2 l²`` and, in eq 5, an asymmetric mass
+      matrix that creates energy). They are **unphysical** and offered only to run
+      the paper's experiment as printed. MuJoCo cannot simulate them (its mass matrix
+      is the physical one), so the plant integrates the printed ODE by the same RK4
+      (1 ms, ``frame_skip`` substeps per env step, the input held) that the filter's
+      model uses, and copies the state into MuJoCo only for rendering. They carry the
+      paper's sign-free friction term: ``friction`` must be ``"paper"``.
 
     ## Action Space
 
@@ -188,7 +192,7 @@ class PendulumSliderEnv(PlantEnv):
 
     ## Arguments
 
-    ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", frame_skip=1,
+    ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", dynamics="physical", frame_skip=1,
     force_max=10.0, R=diag(PAPER_R_STD²), Q=None, nominal=None, initial_state=None,
     initial_state_cov=None, max_episode_steps=5000, render_mode=None, width=480,
     height=360, **params)``,
@@ -196,8 +200,8 @@ class PendulumSliderEnv(PlantEnv):
     steps of 1 ms make one env step. ``Q`` is the true process noise added to the
     state after each env step (none by default: MuJoCo is deterministic); the
     model's ``Q`` defaults to paper 003's 1e-6 per state (``nominal={"Q": ...}``).
-    ``nominal`` may change any physical parameter, ``R``, ``Q`` or ``friction`` for
-    the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
+    ``nominal`` may change any physical parameter, ``R``, ``Q``, ``friction`` or
+    ``dynamics`` for the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
     parameters ``[μ, M0]`` can be estimated jointly with the state.
 
     ## Version History
@@ -211,7 +215,11 @@ class PendulumSliderEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     #: default FIR window (20 ms at 1 kHz)
     default_horizon: ClassVar[int] = 20
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
+    #: the slider's colour in the MJCF (the legend's "truth")
+    truth_color: ClassVar[tuple[int, int, int]] = (209, 84, 46)
+    #: MuJoCo's ``mjMAXVAL``: beyond it MuJoCo resets its simulation at the next step
+    state_limit: ClassVar[float] = 1e10
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100}  # noqa: RUF012
     default_max_episode_steps: ClassVar[int] = 5000
     #: the cap of the bracketed cost (before the Δt / 0.01 scaling)
     BRACKET_CAP: ClassVar[float] = 20.0
@@ -220,6 +228,7 @@ class PendulumSliderEnv(PlantEnv):
         self,
         *,
         friction: str = "paper",
+        dynamics: str = "physical",
         frame_skip: int = 1,
         force_max: float = 10.0,
         R: ArrayLike | None = None,
@@ -238,6 +247,11 @@ class PendulumSliderEnv(PlantEnv):
             raise TypeError(f"unexpected keyword argument(s) {unknown}; physical parameters are "
                             f"{sorted(PAPER_PARAMS)}")
         one_of("friction", friction, FRICTION_MODES)
+        one_of("dynamics", dynamics, EQUATIONS)
+        if dynamics != "physical" and friction != "paper":
+            raise ValueError(f"dynamics={dynamics!r} (paper 003's printed equations) carries the "
+                             f"paper's own friction term; friction must be 'paper', got "
+                             f"{friction!r}")
         phys = {**PAPER_PARAMS, **{k: float(v) for k, v in physical.items()}}
         for name in ("m1", "m2", "l", "I_c", "k", "g"):
             positive(name, phys[name])
@@ -247,6 +261,7 @@ class PendulumSliderEnv(PlantEnv):
         params: dict[str, Any] = {
             **phys,
             "friction": friction,
+            "dynamics": dynamics,
             "frame_skip": positive("frame_skip", frame_skip, integer=True),
             "force_max": positive("force_max", force_max),
             "R": as_covariance("R", np.square(PAPER_R_STD) if R is None else R, 4, definite=True),
@@ -271,6 +286,9 @@ class PendulumSliderEnv(PlantEnv):
             positive("height", height, integer=True)
         self._process_sqrt = psd_sqrt(self.params["Q"])
         self._has_process_noise = bool(np.any(self.params["Q"]))
+        #: the printed ODE the plant integrates in place of MuJoCo (None: MuJoCo)
+        self._printed = (None if dynamics == "physical"
+                         else self._make_dynamics(self.params))
         self._build_simulation()
 
     # ------------------------------------------------------------------ simulation
@@ -314,9 +332,12 @@ class PendulumSliderEnv(PlantEnv):
         self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"],
                                                  p["I_c"])
                               if p["friction"] == "paper" else None)
+        self._stage_rk4 = (None if self._friction_law is None
+                           else StageRK4(m, self.mj_data, self._friction_law.law))
         # views into mj_data, read at every step (a view per attribute access costs more)
         self._qpos_view, self._qvel_view = self.mj_data.qpos, self.mj_data.qvel
         self._ctrl_view = self.mj_data.ctrl
+        self._warning_counts = self.mj_data.warning.number
         self._renderer: mujoco.Renderer | None = None
 
     def _settle_vertical(self) -> float:
@@ -355,17 +376,40 @@ class PendulumSliderEnv(PlantEnv):
         if x.ndim != 1:
             raise ValueError("PendulumSlider-v0 simulates one system; it has no batched path")
         force = float(a[0]) * self.params["force_max"]
+        if self._printed is not None:
+            return self._printed_transition(x, a, force, rng)
         d = self.mj_data
         self._ctrl_view[0] = force
-        law = self._friction_law
-        _mujoco_passive.step(self.mj_model, d, self.params["frame_skip"],
-                             None if law is None else law.callback)
+        if self._stage_rk4 is None:
+            mujoco.mj_step(self.mj_model, d, self.params["frame_skip"])
+        else:
+            self._stage_rk4.step(self.params["frame_skip"])
+        failure = reset_warning(self._warning_counts)
+        if failure is not None:
+            # MuJoCo found a NaN or a value beyond 1e10 and reset its data: the step failed
+            # (the base class ends the episode and restores ``x``, see _restore)
+            return x.copy(), {"force": force, "simulation_failure": failure}
         x_next = self._read_state()
         if self._has_process_noise:
             x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
             self._write_state(x_next)
             d.ctrl[0] = force
         return x_next, {"force": force}
+
+    def _printed_transition(self, x: FloatArray, a: FloatArray, force: float,
+                            rng: np.random.Generator) -> tuple[FloatArray, dict[str, Any]]:
+        """One env step of the printed ODE (RK4); MuJoCo only mirrors the state for drawing."""
+        dyn = self._printed
+        assert dyn is not None
+        x_next = dyn.propagate(x, np.asarray(a, dtype=np.float64), dyn.theta)[0]
+        if self._has_process_noise:
+            x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
+        if np.isfinite(x_next).all():      # a failed step is the base class's to report
+            self._write_state(x_next)
+        return x_next, {"force": force}
+
+    def _restore(self, x: FloatArray) -> None:
+        self._write_state(x)
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return x.copy()
@@ -389,7 +433,8 @@ class PendulumSliderEnv(PlantEnv):
         skip = params["frame_skip"]
         return PendulumSliderDynamics(**{key: params[key] for key in PAPER_PARAMS},
                                       dt=1e-3 * skip, substeps=skip, friction=params["friction"],
-                                      input_scale=params["force_max"])
+                                      input_scale=params["force_max"],
+                                      equations=params["dynamics"])
 
     @property
     def dynamics(self) -> PendulumSliderDynamics:
@@ -397,8 +442,9 @@ class PendulumSliderEnv(PlantEnv):
         return self._make_dynamics(self.nominal_params)
 
     def _build_model(self, params: Mapping[str, Any]) -> Any:
-        return self._make_dynamics(params).model(Q=params["Q"], R=params["R"],
-                                                 name=f"PendulumSlider({params['friction']})")
+        name = (f"PendulumSlider({params['friction']})" if params["dynamics"] == "physical"
+                else f"PendulumSlider({params['dynamics']})")
+        return self._make_dynamics(params).model(Q=params["Q"], R=params["R"], name=name)
 
     # ------------------------------------------------------------------ rendering, pickling
     def render(self) -> NDArray[np.uint8] | None:
@@ -413,7 +459,34 @@ class PendulumSliderEnv(PlantEnv):
                     "without a display set MUJOCO_GL=egl (or osmesa) before importing mujoco"
                 ) from err
         self._renderer.update_scene(self.mj_data, camera="side")
-        return self._renderer.render()
+        frame = self._renderer.render()
+        self._frame_view = self._camera_view()
+        return frame
+
+    def _camera_view(self) -> CameraView:
+        """The "side" camera as the frame just rendered sees the world."""
+        m, d = self.mj_model, self.mj_data
+        cam = m.camera("side").id
+        (px, py, pz), axes = d.cam_xpos[cam].tolist(), d.cam_xmat[cam].reshape(3, 3).T
+        right, up, back = (tuple(row) for row in axes.tolist())  # rows of the transpose
+        return CameraView(self.width, self.height, int(self.time_step), self._sample_period(),
+                          (px, py, pz), (right, up, back), float(m.cam_fovy[cam]))
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The slider's and the bob's centres in MuJoCo's world (the bodies it draws).
+
+        The slider sits at ``(x, 0, z)`` (``z`` is 0, or its resting height on the rail
+        in the "coulomb" mode); the hinge about +y turns the bob's ``(0, 0, −L)`` into
+        ``(−L sin θ, 0, −L cos θ)`` (``L``: the bob geom's distance, 0.2 m).
+        """
+        z = self._z_rest or 0.0
+        L = -float(self.mj_model.geom("bob").pos[2])
+        p, th = float(x[0]), float(x[2])
+        return np.array([[p, 0.0, z], [p - L * math.sin(th), 0.0, z - L * math.cos(th)]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured slider position and angle place both bodies."""
+        return [(point, None) for point in self._picture(y)]
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -425,6 +498,7 @@ class PendulumSliderEnv(PlantEnv):
         state = self.__dict__.copy()
         state["_renderer"] = None
         state.pop("_friction_law")
+        state.pop("_stage_rk4")
         state["_saved_sim"] = (self.mj_data.qpos.copy(), self.mj_data.qvel.copy(),
                                self.mj_data.ctrl.copy(), float(self.mj_data.time))
         for key in ("mj_model", "mj_data"):

@@ -51,7 +51,7 @@ class Evaluation:
 
 
 def make_eval_env(config: RunConfig) -> Any:
-    """One env of ``config``'s kind (what :func:`evaluate` plays)."""
+    """One env of ``config``'s kind (what :func:`evaluate` plays; ``make_env`` too)."""
     from .vec_env import make_single_env
 
     kwargs = recipe(config.observation_kind, config.kind_kwargs, config.observation).kwargs()

@@ -4,6 +4,7 @@ from .baselines import MeasurementObservation, TrueStateObservation
 from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
 from .factory import wrap_observation
 from .measurement_stack import MeasurementStack, VectorMeasurementStack
+from .shadow import ShadowEstimator
 from .vector_estimator_observation import VectorEstimatorObservation
 
 __all__ = [
@@ -11,6 +12,7 @@ __all__ = [
     "EstimatorObservation",
     "MeasurementObservation",
     "MeasurementStack",
+    "ShadowEstimator",
     "TrueStateObservation",
     "VectorEstimatorObservation",
     "VectorMeasurementStack",
