@@ -48,8 +48,9 @@ class does what must be identical everywhere:
   plant then stays at the last valid state (``info["state"]`` and :attr:`state`),
   the observation repeats the last one, the reward is the terminal penalty (below:
   a failed step is a termination like any other, so breaking the simulation never
-  pays), and per-step extras that are not finite are left out of ``info``. ``render()`` of a state that is not valid (set by hand) draws the
-  finite parts of the scene inside a red frame.
+  pays), and per-step extras that are not finite are left out of ``info``.
+  ``render()`` of a state that is not valid (set by hand) draws the finite parts of
+  the scene inside a red frame.
 * **Rewards and episode end (honest tasks).** Every per-step reward is a *saturated
   cost*: ``-min(cost, cost_cap)`` (a non-finite cost counts as ``cost_cap``), so it
   is finite and never below ``-cost_cap``, the plant's documented worst rate. The
