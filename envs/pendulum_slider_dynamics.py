@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fir_gym.estimators._compiled import active
+from fir_gym.estimators import compiled
 from fir_gym.estimators._validation import FloatArray, one_of, positive
 from fir_gym.estimators.augment import ParametricModel
 
@@ -155,7 +155,7 @@ class PendulumSliderDynamics:
         With numba the same loop runs compiled, system by system
         (:func:`~._interval_kernels.slider_rk4`; equal to round-off, tested).
         """
-        if active(slider_rk4):
+        if compiled.ENABLED:
             return self._propagate_compiled(x, u, theta, jacobian)
         U = self.input_scale * u[..., 0]
         theta = np.broadcast_to(theta, x.shape[:-1] + (2,))

@@ -287,16 +287,18 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
         """As :meth:`Estimator.step`; a global-recursion breakdown also sets ``diverged``."""
         x = super().step(y, u)
-        if self._broken is not None:
-            if self._broken.any():
-                self._diverged |= self._broken
-                self.last_info["diverged"] = self.diverged
-            single = self._single
-            self.last_info["riccati_breakdown"] = (bool(self._broken[0]) if single
-                                                   else self._broken.copy())
-            self.last_info["riccati_condition"] = (float(self._condition[0]) if single
-                                                   else self._condition.copy())
+        if self._broken is not None and self._broken.any():
+            self._diverged |= self._broken
         return x
+
+    def _step_info(self) -> dict[str, Any]:
+        if self._broken is None or self._condition is None:
+            return {}
+        if self._single:
+            return {"riccati_breakdown": bool(self._broken[0]),
+                    "riccati_condition": float(self._condition[0])}
+        return {"riccati_breakdown": self._broken.copy(),
+                "riccati_condition": self._condition.copy()}
 
     # ------------------------------------------------------------------ hooks
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray

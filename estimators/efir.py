@@ -46,7 +46,6 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _efir_lean
 from ._fir_bank import WindowBank
 from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import WindowedEstimator
@@ -89,9 +88,11 @@ class ExtendedFIRFilter(WindowedEstimator):
     GQGᵀ``). :meth:`restart` starts chosen systems of a batch again from ``x0``
     (nominal, windows and start-up); the others do not notice.
 
-    One system given as ``(n_y,)`` steps, once its windows are full, through the fast
-    path of :mod:`~._efir_lean`: the same numbers bit for bit, in about a third of the
-    time of the batched code on a batch of one.
+    One step is one pass over the windows (:meth:`_advance`): the model's ``f, F`` on
+    the nominal, the window bank's time update, ``h, H`` on the nominal, its measurement
+    update and the read-out of the oldest window — the bank's operations and the
+    divergence watch run their compiled twins where numba is enabled, for one system
+    and a batch alike.
     """
 
     name: ClassVar[str] = "efir"
@@ -146,11 +147,6 @@ class ExtendedFIRFilter(WindowedEstimator):
     def _restart_systems(self, mask: np.ndarray) -> None:
         super()._restart_systems(mask)
         self._in_startup = True
-
-    def _make_lean(self) -> Any:
-        """The single-system fast step (:func:`~._efir_lean.extended_fir`); a subclass that
-        overrides a step hook gets none."""
-        return _efir_lean.extended_fir(self, ExtendedFIRFilter)
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:

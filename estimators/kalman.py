@@ -25,20 +25,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _lean, _small
-from ._compiled import active
-from ._kalman_kernels import predict_update
-from ._kalman_linalg import (
-    as_batch,
-    constant_or_batch,
-    eye,
-    mul_t,
-    rmul,
-    spd_inverse,
-    symmetrize,
-)
+from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
+from .compiled import kalman as compiled_kalman
 from .model import StateSpaceModel
 from .registry import register_estimator
 
@@ -229,7 +219,7 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
 class KalmanFilter(Estimator):
     """Linear Kalman filter on a :class:`LinearModel` or :class:`TimeVaryingLinearModel`.
 
-    Convention for time-varying models (ARCHITECTURE.md): the prediction
+    Convention for time-varying models (docs/architecture.md): the prediction
     ``x[k-1] → x[k]`` uses ``A, B, G, Q`` of ``model.matrices(k-1)``; the update
     at ``k`` uses ``C, R`` of ``model.matrices(k)``. Options are those of
     :class:`~fir_gym.estimators.base.Estimator` (``nan_policy``, divergence limits).
@@ -238,22 +228,25 @@ class KalmanFilter(Estimator):
     model does not depend on the data:
 
     * **shared covariance** — systems of a batch started from one unbatched
-      ``P0`` and always updated together have the same ``P``; it is computed once
-      and broadcast (a read-only view), so a batch costs one covariance update
-      plus the state updates;
+      ``P0`` and always updated together have the same ``P``; it is held once
+      (``(1, n, n)``) and computed once per step, so a batch costs one covariance
+      update plus the state updates. A skipped measurement or a restart gives every
+      system its own ``P`` from then on;
     * **steady state** — for a time-invariant model, once a step maps ``P`` to
       itself up to round-off (``max|ΔP| <= 4 eps max|P|``; the recursion then only
-      wanders by a few ulps, often in a cycle, never settling bit for bit), the
-      ``P⁺``, ``K`` and ``S⁻¹`` of that step are kept and only the state is
-      updated. Estimates differ from the full recursion at the round-off level
-      (about 1e-16 relative). A skipped measurement, a divergence repair or
-      ``reset`` leaves that regime.
+      wanders by a few ulps, often in a cycle, never settling bit for bit), ``P`` and
+      that step's ``K`` and ``S⁻¹`` are kept and only the state is updated.
+      Estimates differ from the full recursion at the round-off level (about 1e-16
+      relative). A skipped measurement, a repaired (non-finite) estimate, a restart
+      or ``reset`` leaves that regime.
 
-    One system of ``n_x, n_y <= 4`` steps through generated float kernels
-    (:mod:`~._lean`): the same recursion and shortcuts, to round-off.
+    The compiled twin (:func:`~.compiled.kalman.linear_step`) does the same step, both
+    shortcuts included, in one call.
     """
 
     name = "kf"
+    has_compiled_step = True
+    twin_replaces = (*Estimator.twin_replaces, "_correct", "_matrices")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
@@ -261,87 +254,121 @@ class KalmanFilter(Estimator):
             raise TypeError(f"model must be a LinearModel or TimeVaryingLinearModel for "
                             f"{type(self).__name__}; got {type(model).__name__} "
                             f"(use ExtendedKalmanFilter or UnscentedKalmanFilter)")
-        self._constant = getattr(model, "time_invariant", True)
+        self._constant = bool(getattr(model, "time_invariant", True))
         if self._constant:
             self._mats = self._prepare(model.matrices(0))
-            self._A_batch = as_batch(model.matrices(0)[0])  # the compiled step's layout
         super().__init__(model, x0=x0, P0=P0, **options)
 
     @staticmethod
-    def _prepare(mats: Any) -> tuple[FloatArray | None, ...]:
+    def _prepare(mats: Any) -> StepMatrices:
         A, B, C, G, Q, R = mats
-        return (np.ascontiguousarray(A.T), np.ascontiguousarray(B.T) if B.shape[1] else None,
-                C, np.ascontiguousarray(C.T), G @ Q @ G.T, R)
+        return StepMatrices(np.ascontiguousarray(A), np.ascontiguousarray(B),
+                            np.ascontiguousarray(C), np.ascontiguousarray(G @ Q @ G.T),
+                            np.ascontiguousarray(R))
 
-    def _matrices(self, k: int) -> tuple[Any, ...]:
+    def _matrices(self, k: int) -> StepMatrices:
         return self._mats if self._constant else self._prepare(self.model.matrices(k))
 
     def _reset_state(self) -> None:
-        self._steady: tuple[FloatArray, ...] | None = None
-        self._lean_steady: tuple[Any, ...] | None = None
-
-    def _make_lean(self) -> Any:
-        return _lean.kalman(self) if _small.same_hooks(self, KalmanFilter) else None
+        #: [steady state now, may settle (a time-invariant model)]; with the gains of the
+        #: steady state, ``K`` and ``S⁻¹`` of each row of ``P``, held as blocks ``(n, m, rows)``
+        #: (:mod:`.compiled.linalg`)
+        self._regime = np.array([0, int(self._constant)], dtype=np.int64)
+        self._gain_K = np.zeros((self.model.n_x, self.model.n_y, 0))
+        self._gain_W = np.zeros((self.model.n_y, self.model.n_y, 0))
 
     def _init_batch(self, n_batch: int) -> None:
-        if self._P0.ndim == 2 and n_batch > 1:        # one covariance for the whole batch
-            self._P = np.broadcast_to(self._P0, (n_batch, *self._P0.shape))
+        if self._P0.ndim == 2:                         # one covariance for the whole batch
+            self._P = self._P0[None].copy()
 
+    def _restart_systems(self, mask: np.ndarray) -> None:
+        self._regime[0] = 0
+
+    @property
+    def steady_state(self) -> bool:
+        """Whether the filter is in the steady-state regime (``P``, ``K``, ``S⁻¹`` kept)."""
+        return bool(self._regime[0])
+
+    # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         return self._correct(x, P, y, valid, self._matrices(0))[:3]
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        At, Bt, _, _, Qd, _ = self._matrices(self._k - 1)
-        x = rmul(x, At)
-        if Bt is not None:
-            x = x + rmul(u, Bt)
-        steady = self._steady
-        if steady is not None and P is steady[0] and valid is self._all_valid:
-            P_new, K, W, Ct = steady
-            x, nis = correct(x, y - rmul(x, Ct), K, W)
-            return x, P_new, nis
-        self._steady = None
-        if P.strides[0] == 0 and valid is self._all_valid:
-            P = P[:1]                                   # shared covariance
-        elif P.shape[0] > 1 and active(predict_update):  # one covariance per system: compiled
-            mats = self._matrices(self._k)
-            _, _, C, Ct, _, R = mats
-            A = self._A_batch if self._constant else as_batch(At.T)
-            x_new, P_new, nis = predict_update(x, as_batch(P), A, Qd, y - rmul(x, Ct),
-                                               C[None], R[None], valid)
-            if self._constant and valid is self._all_valid and _converged(P_new, P):
-                K, W, _ = gain_kernel(predict_covariance(P, At.T, Qd), C, R)
-                self._steady = (P_new, K, W, Ct)
-            return x_new, P_new, nis
-        P_pred = predict_covariance(P, At.T, Qd)       # A P Aᵀ + G Q Gᵀ
+        A, B, _, Qd, _ = self._matrices(self._k - 1)
+        x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
+        every = valid is self._all_valid and not self._restarting
+        if self._regime[0] and every:                  # steady state: P, K, S⁻¹ kept
+            K, W = self._gain_K.transpose(2, 0, 1), self._gain_W.transpose(2, 0, 1)
+            x, nis = correct(x, y - x @ self._mats.C.T, K, W)
+            self._regime[0] = int(bool(np.isfinite(x).all()))
+            return x, P, nis
+        self._regime[0] = 0
         mats = self._matrices(self._k)
-        x_new, P_new, nis, K, W = self._correct(x, P_pred, y, valid, mats)
-        if K is not None and self._constant and _converged(P_new, P):
-            self._steady = (P_new, K, W, mats[3])
+        x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
+                                                mats)
+        if (self._regime[1] and every and _converged(P_new, P)
+                and np.isfinite(x_new).all() and np.isfinite(P_new).all()):
+            self._regime[0] = 1
+            self._gain_K = np.ascontiguousarray(K.transpose(1, 2, 0))
+            self._gain_W = np.ascontiguousarray(W.transpose(1, 2, 0))
         return x_new, P_new, nis
 
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
-                 mats: tuple[Any, ...]) -> tuple[Any, ...]:
-        _, _, C, Ct, _, R = mats
-        e = y - rmul(x, Ct)
+                 mats: StepMatrices) -> tuple[Any, ...]:
+        """The update ``(x⁺, P⁺, nis, K, S⁻¹)``; a shared ``P`` is split where some system has
+        no usable measurement (``K`` and ``S⁻¹`` are then not returned)."""
+        C, R = mats.C, mats.R
+        e = y - x @ C.T
         if valid is not self._all_valid:
-            if P.strides[0] == 0 or P.shape[0] != x.shape[0]:
-                P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+            if P.shape[0] != x.shape[0]:
+                P = np.repeat(P, x.shape[0], axis=0)
             x_new, P_new, _, nis = update_kernel(x, P, e, C, R, valid)
             return x_new, P_new, nis, None, None
         K, W, P_new = gain_kernel(P, C, R)
         x_new, nis = correct(x, e, K, W)
-        if P_new.shape[0] != x.shape[0]:
-            P_new = np.broadcast_to(P_new, (x.shape[0], *P_new.shape[1:]))
         return x_new, P_new, nis, K, W
+
+    # ------------------------------------------------------------------ compiled twin
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        mats = self._matrices(0)
+        self._linear_step(mats, mats, self._no_input, y, valid)
+
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        self._linear_step(self._matrices(self._k - 1), self._matrices(self._k), u, y, valid)
+
+    def _linear_step(self, prediction: StepMatrices, update: StepMatrices, u: FloatArray,
+                     y: FloatArray, valid: np.ndarray) -> None:
+        x, P = self._x, self._P
+        assert x is not None and P is not None
+        if valid is not self._all_valid:               # a missing measurement: no shortcuts
+            self._regime[0] = 0
+            if P.shape[0] < x.shape[0]:
+                P = self._P = np.repeat(P, x.shape[0], axis=0)
+        if self._gain_K.shape[2] != P.shape[0]:
+            self._regime[0] = 0
+            self._gain_K = np.zeros(self._gain_K.shape[:2] + P.shape[:1])
+            self._gain_W = np.zeros(self._gain_W.shape[:2] + P.shape[:1])
+        compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
+                                    prediction.Qd, update.R, y, valid, self._predicting(),
+                                    self._gain_K, self._gain_W, self._regime, self._diverged,
+                                    self._nis_run, self._nis, self._limits)
+
+
+class StepMatrices(NamedTuple):
+    """A linear model's matrices as a filter step uses them: ``A, B, C``, ``Qd = G Q Gᵀ``, ``R``."""
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    Qd: FloatArray
+    R: FloatArray
 
 
 def _converged(P_new: FloatArray, P: FloatArray) -> bool:
     """Whether the Riccati recursion has reached round-off: ``max|ΔP| <= 4 eps max|P|``."""
-    if P.shape[0] == 1 or P.strides[0] == 0:
-        P_new, P = P_new[:1], P[:1]
     scale = float(np.abs(P).max())
     return float(np.abs(P_new - P).max()) <= 4.0 * _EPS * scale
 
@@ -360,16 +387,22 @@ class LinearizedKalmanFilter(Estimator):
     estimate is ``x̂ = x_nom + δx̂``. Unlike the EKF the linearisation point never
     sees the measurements, so the LKF is exact on linear models and degrades as
     the truth leaves the nominal path.
+
+    The compiled twin hands the covariance algebra to
+    :func:`~.compiled.kalman.predict_update` with ``x⁻ = x_nom + F δx`` and ``ŷ =
+    h(x_nom) + H δx⁻`` (the same update: ``x⁺ = x⁻ + K (y − ŷ)``).
     """
 
     name = "lkf"
+    has_compiled_step = True
 
     def _init_batch(self, n_batch: int) -> None:
-        self._x_nom = self._x.copy()
+        self._x_nom = self._x.copy()                   # type: ignore[union-attr]
 
     def _reset_state(self) -> None:
-        self._x_nom = None
+        self._x_nom: FloatArray | None = None
         self._GQGt = self.model.GQGT
+        self._R_batch = self.model.R[None]
 
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -387,8 +420,9 @@ class LinearizedKalmanFilter(Estimator):
                         y: FloatArray, valid: np.ndarray
                         ) -> tuple[FloatArray, FloatArray, FloatArray]:
         # a restarted system's nominal path starts again at its prior
-        self._x_nom[idx] = x
-        return self._correct(np.zeros_like(x), P, y, valid, self._x_nom[idx])
+        self._x_nom[idx] = x                           # type: ignore[index]
+        return self._correct(np.zeros_like(x), P, y, valid,  # type: ignore[arg-type]
+                             self._x_nom[idx])          # type: ignore[index]
 
     def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
                  x_nom: FloatArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -396,7 +430,36 @@ class LinearizedKalmanFilter(Estimator):
         H = self.model.H(x_nom)
         e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
         dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
-        return x_nom + dx, P, nis
+        return x_nom + dx, P, nis                      # type: ignore[operator]
+
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        self._compiled_step(y, self._no_input, valid, predict=False)
+
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        self._compiled_step(y, u, valid, predict=True)
+
+    def _compiled_step(self, y: FloatArray, u: FloatArray, valid: np.ndarray, predict: bool
+                       ) -> None:
+        model, x, nom = self.model, self._x, self._x_nom
+        assert x is not None and nom is not None
+        with np.errstate(all="ignore"):
+            if predict:                                # the nominal moves on, open loop
+                F = model.F(nom, u)
+                nom_next = model.f(nom, u)
+                xp = nom_next + (F @ (x - nom)[:, :, None])[:, :, 0]   # x_nom + F δx
+                if self._restarting:                   # a restarted nominal starts again
+                    fresh = self._fresh[:, None]
+                    nom_next = np.where(fresh, x, nom_next)
+                    xp = np.where(fresh, x, xp)
+                self._x_nom = nom_next
+            else:
+                F, nom_next, xp = np.eye(model.n_x)[None], nom, x
+            H = model.H(nom_next)
+            hx = model.h(nom_next) + (H @ (xp - nom_next)[:, :, None])[:, :, 0]
+        compiled_kalman.predict_update(x, self._P, xp, F, self._GQGt, y, hx, H,
+                                       self._R_batch, valid, self._predicting(),
+                                       self._diverged, self._nis_run, self._nis, self._limits)
 
     @property
     def x_nominal(self) -> FloatArray | None:

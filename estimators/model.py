@@ -5,7 +5,7 @@ A :class:`StateSpaceModel` is the discrete-time stochastic system
     x[k+1] = f(x[k], u[k]) + G w[k],      w[k] ~ N(0, Q)
     y[k]   = h(x[k]) + v[k],              v[k] ~ N(0, R)
 
-with sample period ``dt`` (ARCHITECTURE.md, "The two contracts"). Every
+with sample period ``dt`` (docs/architecture.md, "The model contract"). Every
 callable accepts a leading batch axis: ``x`` of shape ``(n_x,)`` or
 ``(B, n_x)``, ``u`` of shape ``(n_u,)`` or ``(B, n_u)``; the result has the
 same leading shape. :class:`LinearModel` is the special case
@@ -172,6 +172,20 @@ class StateSpaceModel(_ModelCore):
         if self._fF is not None:
             return self._fF(x, u)
         return self.f(x, u), self.F(x, u)
+
+    def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(f(x, u), F(x, u))`` for arrays a filter already holds in the right shapes.
+
+        No argument checks (the filters' hot path; use :meth:`linearize` otherwise);
+        a subclass's own ``f`` or ``F`` is called as it is, and ``F`` falls back to the
+        finite differences of :meth:`F`. A bound method of the model, so a filter
+        holding it copies and pickles with its model.
+        """
+        cls = type(self)
+        fx = self._f(x, u) if cls.f is StateSpaceModel.f else self.f(x, u)
+        if cls.F is StateSpaceModel.F and self._F is not None:
+            return fx, self._F(x, u)
+        return fx, self.F(x, u)
 
     # ------------------------------------------------------------------ properties
 

@@ -14,16 +14,16 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fir_gym.estimators import _compiled
+from fir_gym.estimators import compiled
 
 
 def numpy_path(step: Any, k: int) -> Any:
     """``step(k)`` with the compiled kernels switched off (the numpy reference path)."""
-    _compiled.ENABLED = False
+    compiled.ENABLED = False
     try:
         return step(k)
     finally:
-        _compiled.ENABLED = True
+        compiled.ENABLED = True
 
 
 def mujoco_stepper(friction: str) -> Any:

@@ -50,7 +50,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fir_gym.estimators import _compiled
+from fir_gym.estimators import compiled
 
 from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
@@ -94,7 +94,7 @@ def kalman_section(quick: bool) -> dict[str, Any]:
             ours(k + 1)
             big(k + 1)
         runs = {"ours": (counting(ours), calls), "big": (counting(big), big_calls)}
-        if _compiled.ENABLED:                           # the same filter on its numpy path
+        if compiled.ENABLED:                           # the same filter on its numpy path
             big_numpy = kalman_bench.ours_stepper(cls, model, 1024, skip, **opts)
             for k in range(2000):
                 _floors.numpy_path(big_numpy, k + 1)
@@ -131,7 +131,7 @@ def _efir_batched(quick: bool) -> dict[str, Any]:
     for k in range(12):
         efir.step(ys[k], None if k == 0 else u)
     runs = {"efir": (counting(lambda k: efir.step(ys[12 + k % 52], u)), 3 if quick else 10)}
-    if _compiled.ENABLED:
+    if compiled.ENABLED:
         slow = ExtendedFIRFilter(model, horizon=10, x0=x0)
         for k in range(12):
             _floors.numpy_path(lambda k: slow.step(ys[k], None if k == 0 else u), k)
@@ -319,7 +319,7 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
         "python": platform.python_version(), "numpy": np.__version__,
         "platform": platform.platform(), "cpus": os.cpu_count(),
         "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
-        "compiled_kernels": (f"numba {_compiled.numba.__version__}" if _compiled.ENABLED
+        "compiled_kernels": (f"numba {compiled.numba.__version__}" if compiled.ENABLED
                              else "off (numpy paths)"),
         "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}}
     start = time.perf_counter()
