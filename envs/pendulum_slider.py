@@ -27,7 +27,7 @@ RAIL_SOLIMP = (0.99, 0.9999, 0.0001, 0.5, 2.0)
 class PaperFrictionForce:
     """Paper 003's sign-free friction term, solved exactly at every RK4 stage.
 
-    Eq (15) (with the errata of PAPERS.md) adds to the slider the force
+    Eq (15) (with the errata of docs/papers.md#003-eq-15) adds to the slider the force
     ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
     force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
     ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``

@@ -25,7 +25,7 @@ class OscillatorDynamics(FirstStateMeasured):
     ``b = 12`` (so ``x1`` settles at ``b / c = 0.48``; ``x3`` is a constant damping
     parameter, ω = 5). ``D_k = diag(1 + δ_k, 1 + δ_k, 1)``.
 
-    Two readings of eq (29) (PAPERS.md, paper 000, sim 2):
+    Two readings of eq (29) (docs/papers.md#000-eq-29-readings):
 
     * ``"state"`` (the printed one): ``x⁺ = D x + r(x) Δ`` — the uncertainty scales
       the state itself, so the truth grows about 12.6 % per step while δ = 0.15;

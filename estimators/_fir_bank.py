@@ -48,7 +48,8 @@ class WindowBank:
 
     Window ``w`` of system ``b`` runs a Kalman filter from ``x̄ = x_ref, P = 0`` with
     the sensitivity ``T = ∂x̄/∂x_start`` and the normal equations ``F = Σ (C T⁻)ᵀ
-    Σ⁻¹ (C T⁻)``, ``b = Σ (C T⁻)ᵀ Σ⁻¹ e`` (PAPERS.md §000). One array holds it all,
+    Σ⁻¹ (C T⁻)``, ``b = Σ (C T⁻)ᵀ Σ⁻¹ e`` (docs/papers.md#000-two-stage-form).
+    One array holds it all,
     ``Z[b, :, w] = [[P | T | x̄], [· | −F | b]]`` (``2n x (2n+1)``), so a measurement
     update is one matmul ``r = C [P | T | x̄] − [0 | 0 | y] = [C P | C T | −e]`` and
     one rank-``p`` correction ``Z −= [K; W] ⊗ r`` with ``[K; W] = [P Cᵀ; (C T)ᵀ] Σ⁻¹``.

@@ -2,7 +2,7 @@
 
 Every public constructor, ``reset`` and ``step`` in this package validates its
 inputs here, so a bad argument fails at the boundary with a message that names
-the argument and says what was expected (docs/architecture.md, "Names and style").
+the argument and says what was expected (docs/architecture.md#validation).
 Numbers must be real: :func:`real_array` refuses booleans, complex numbers, dates and
 anything non-numeric (strings, ``None``) instead of letting numpy convert or drop them.
 """

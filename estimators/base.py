@@ -1,4 +1,4 @@
-"""The Estimator contract shared by every filter (docs/architecture.md, "The estimator contract").
+"""The Estimator contract shared by every filter (docs/architecture.md#estimator-contract).
 
 An estimator is one object per filter, batched by design:
 

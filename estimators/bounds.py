@@ -18,7 +18,7 @@ term ``ΔK V ΔKᵀ`` (the paper's ``ΔK ΔKᵀ`` is the case ``V = I``).
 
 **Δπ₁** (Theorem 3.1, ``ΔA = ΔC = 0``): ``R_r − R = ∫_0^T Φ_F ΔK V ΔKᵀ Φ_Fᵀ dτ``
 (3.7, ``Φ_F = Φ_F(T, τ)`` of the nominal filter). Eq 3.2 read as
-``∫ ‖Φ_F ΔK ΔKᵀ Φ_Fᵀ‖_F dτ`` (PAPERS.md) is *not* an upper bound in general: for a
+``∫ ‖Φ_F ΔK ΔKᵀ Φ_Fᵀ‖_F dτ`` (docs/papers.md#001-eq-3-2) is *not* an upper bound in general: for a
 PSD matrix ``‖X‖_F ≤ tr X``, so it is ≤ ``tr(R_r − R)`` when ``V = I``, with equality
 when the integrand has rank one (one output, as in Table 1) — there it is the
 exact difference, not a bound. The step 3.9 → 3.10 misapplies Lemma 1 (eq 1.5),
@@ -166,7 +166,7 @@ def delta_pi1(true: ContinuousModel, nominal: ContinuousModel, horizon: float | 
               n_steps: int | None = None) -> NoiseBound:
     """Theorem 3.1 (``ΔA = ΔC = 0``): the paper's Δπ₁ (eq 3.2), a valid bound, the exact trace.
 
-        paper  = ∫_0^T ‖Φ_F ΔK ΔKᵀ Φ_Fᵀ‖_F dτ          (eq 3.2, PAPERS.md reading)
+        paper  = ∫_0^T ‖Φ_F ΔK ΔKᵀ Φ_Fᵀ‖_F dτ          (eq 3.2, docs/papers.md#001-eq-3-2)
         lemma1 = ∫_0^T ‖Φ_FᵀΦ_F‖_F ‖ΔK V ΔKᵀ‖_F dτ      (Lemma 1, eq 1.5: valid)
         trace  = ∫_0^T tr(Φ_F ΔK V ΔKᵀ Φ_Fᵀ) dτ          (= tr(R_r − R), eq 3.7)
 

@@ -7,7 +7,7 @@ here at the current estimate: ``A_k = A(x̂(t_k))``. An input enters as the
 frozen term ``b_k = a(x̂_k, u) − A_k x̂_k`` (zero when ``u = 0``).
 
 **Block-pulse integration** of ``ẋ = M x + b`` with ``M, b`` constant on the
-interval (eqs 2.11–2.16, with the eq 2.14 erratum of PAPERS.md): the interval
+interval (eqs 2.11–2.16, with the eq 2.14 erratum, docs/papers.md#002-errata): the interval
 coefficient (average) is ``X = (I − h/2 M)⁻¹ (x(t_k) + h/2 b)`` (eq 2.14, first
 line) and the end value ``x(t_k + h) = 2 X − x(t_k)`` (eq 2.16), i.e.
 

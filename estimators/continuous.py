@@ -11,7 +11,7 @@ its block-pulse coefficient — the interval average
 
     ȳ[k] = (1/dt) ∫_{t_{k-1}}^{t_k} dz = (1/dt) ∫ h(x) dt + v̄[k],   v̄[k] ~ N(0, R/dt)
 
-(paper 002's "BPF coefficient of z"; see PAPERS.md, 002). The block-pulse
+(paper 002's "BPF coefficient of z"; see docs/papers.md#002-interval-average). The block-pulse
 filter additionally needs a state-dependent factorisation ``A(x)`` with
 ``a(x, 0) = A(x) x`` (Pearson's form, paper 002 eq 2.2); the model carries it
 when the plant provides one.

@@ -13,7 +13,7 @@ estimate), ``"predictor"`` → ``x[L]`` (paper 000's form), ``"smoother"`` →
 ``Π0`` the start state is ``N(0, Π0)`` (paper 004 Theorem 2.1). Three ways:
 
 (a) :func:`batch_gain` — the stacked formula, paper 000 Theorem 1 (eq 20),
-    corrected (PAPERS.md §000: ``Π = G̃ Q_N G̃ᵀ + R_N``): cost O((L·p)³).
+    corrected (docs/papers.md#000-theorem-1: ``Π = G̃ Q_N G̃ᵀ + R_N``): cost O((L·p)³).
 (b) :func:`riccati_gain` — paper 004: Theorem 2.1 (any prior), Corollary 2.1
     (:func:`stationary_prior`) and Corollary 2.2 (no prior, information form,
     transposes restored, "Q^k" read as Q½; needs an invertible A).
@@ -227,7 +227,7 @@ def riccati_gain(win: Window, form: str = "filter", prior: ArrayLike | None = No
     (``Bq Bqᵀ = BQBᵀ``). It needs every ``A_j`` of the window invertible (a
     ValueError otherwise; path (c) has no such need). The no-prior smoother
     (Cor 3.2) needs ``[S(n+1) − CᵀC]⁻¹``, singular when ``p < n``: it is not
-    offered here — use :func:`two_stage_gain` (PAPERS.md §004).
+    offered here — use :func:`two_stage_gain` (docs/papers.md#004-cor-3-2).
     """
     L = win.horizon
     _target(form, L)
@@ -327,7 +327,8 @@ class TwoStageForward(NamedTuple):
 
 
 def two_stage_forward(win: Window) -> TwoStageForward:
-    """Forward sweep of path (c): KF from ``x̄⁻ = 0, P⁻ = 0, T⁻ = I`` (PAPERS.md §000)::
+    """Forward sweep of path (c): KF from ``x̄⁻ = 0, P⁻ = 0, T⁻ = I``
+    (docs/papers.md#000-two-stage-form)::
 
         Σ = C P⁻ Cᵀ + R,  K = P⁻ Cᵀ Σ⁻¹,  Z = C T⁻,  F += Zᵀ Σ⁻¹ Z
         T = (I − K C) T⁻,  P = (I − K C) P⁻,  T⁻ ← A T,  P⁻ ← A P Aᵀ + GQGᵀ

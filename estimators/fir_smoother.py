@@ -8,7 +8,7 @@ with ``L = N + 1``).
   least-squares estimate of the window-start state,
   ``x̂_s = (C̃ᵀΠ⁻¹C̃)⁻¹C̃ᵀΠ⁻¹ (Y − D̃ U)``. Paper 004's Cor 3.2 computes it through
   ``[S(n+1) − CᵀC]⁻¹``, which is singular whenever there are fewer outputs than
-  states (PAPERS.md §004), so it is computed stably instead: by the two-stage
+  states (docs/papers.md#004-cor-3-2), so it is computed stably instead: by the two-stage
   recursion, where it is ``F⁻¹ b`` — the start-state estimate the FIR filter
   already forms (path (c), default) — or by the batch formula (path (a)).
 * **With a prior** ``x[k-L+1] ~ N(0, Π0)`` (``prior="stationary"``: Cor 3.1's

@@ -219,7 +219,7 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
 class KalmanFilter(Estimator):
     """Linear Kalman filter on a :class:`LinearModel` or :class:`TimeVaryingLinearModel`.
 
-    Convention for time-varying models (docs/architecture.md): the prediction
+    Convention for time-varying models (docs/architecture.md#time-varying-models): the prediction
     ``x[k-1] → x[k]`` uses ``A, B, G, Q`` of ``model.matrices(k-1)``; the update
     at ``k`` uses ``C, R`` of ``model.matrices(k)``. Options are those of
     :class:`~fir_gym.estimators.base.Estimator` (``nan_policy``, divergence limits).

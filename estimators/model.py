@@ -5,7 +5,7 @@ A :class:`StateSpaceModel` is the discrete-time stochastic system
     x[k+1] = f(x[k], u[k]) + G w[k],      w[k] ~ N(0, Q)
     y[k]   = h(x[k]) + v[k],              v[k] ~ N(0, R)
 
-with sample period ``dt`` (docs/architecture.md, "The model contract"). Every
+with sample period ``dt`` (docs/architecture.md#model-contract). Every
 callable accepts a leading batch axis: ``x`` of shape ``(n_x,)`` or
 ``(B, n_x)``, ``u`` of shape ``(n_u,)`` or ``(B, n_u)``; the result has the
 same leading shape. :class:`LinearModel` is the special case

@@ -10,7 +10,7 @@ The FIR filter ``f_i = x̂(i|N)`` and smoother ``s_i = x̂_s(i−N|N)`` over the
 with ``H_0 = H(0;N)``, ``H_N = H(N;N)`` the filter's weights on the newest and
 oldest measurement, ``H_s0 = H_s(0;N)``, ``H_sN = H_s(−N;N)`` the smoother's on the
 oldest and newest, ``M1 = (I − H_0 C) A``, ``M2 = (I − H_s0 C)⁻¹`` and, corrected
-(PAPERS.md §004)::
+(docs/papers.md#004-recursive-form)::
 
     M4 = [A − H_sN C A H_N C] M2                       (printed: [A − H_sN C A] H_N C M2)
 

@@ -2,7 +2,7 @@
 
 Over the window the UFIR estimate is ordinary least squares of the window-start
 state on the stacked observation matrix, propagated to the estimation time
-(PAPERS.md, "Beyond the papers")::
+(docs/papers.md#beyond-ufir)::
 
     x̂ = Φ (C̃ᵀC̃)⁻¹ C̃ᵀ (Y − D̃ U) + M_B U,      C̃ = [C_j Φ_j]_j,  Φ_j = A_{j−1}⋯A_0
 

@@ -1,47 +1,91 @@
-"""Registration of the fir-gym environment ids with Gymnasium.
+"""Registration of the fir-gym environment ids with Gymnasium (docs/architecture.md#registration).
 
-Every id's entry point is a factory (``fir_gym._registration:<name>``) that builds
-the plant and, when asked, wraps it: ``gym.make(id, estimator="ekf",
-estimator_kwargs={...}, observation="estimate")`` (see
-:func:`fir_gym.wrappers.factory.make_plant`).
+One literal :func:`gymnasium.register` call per id, as Gymnasium registers its own
+environments. Every entry point is a module attribute of this file, written out per
+plant: ``<plant>`` builds the plant and, when asked, wraps it —
+``gym.make(id, estimator="ekf", estimator_kwargs={...}, observation="estimate")``
+(see :func:`fir_gym.wrappers.factory.make_plant`) — and ``<plant>_vector`` builds its
+native vector env, ``gym.make_vec(id, n, vectorization_mode="vector_entry_point")``.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import gymnasium as gym
 
 from .wrappers.factory import plant_factory, plant_vector_factory
 
-#: (id, entry-point name in this module, plant class, max_episode_steps, native vector env)
-_SPECS: tuple[tuple[str, str, str, int, bool], ...] = (
-    ("fir_gym/Orbit-v0", "orbit", "fir_gym.envs.orbit:OrbitEnv", 1000, True),
-    ("fir_gym/UncertainOscillator-v0", "uncertain_oscillator",
-     "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv", 500, True),
-    ("fir_gym/CarrierMotion-v0", "carrier_motion",
-     "fir_gym.envs.carrier_motion:CarrierMotionEnv", 1000, True),
-    ("fir_gym/VanDerPol-v0", "van_der_pol", "fir_gym.envs.van_der_pol:VanDerPolEnv", 100, True),
-    ("fir_gym/PendulumSlider-v0", "pendulum_slider",
-     "fir_gym.envs.pendulum_slider:PendulumSliderEnv", 5000, False),
-)
+# Entry points: "fir_gym._registration:<name>" in the register() calls below.
+orbit = plant_factory("fir_gym.envs.orbit:OrbitEnv")
+orbit_vector = plant_vector_factory("fir_gym.envs.orbit:OrbitEnv")
+uncertain_oscillator = plant_factory("fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv")
+uncertain_oscillator_vector = plant_vector_factory(
+    "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv")
+carrier_motion = plant_factory("fir_gym.envs.carrier_motion:CarrierMotionEnv")
+carrier_motion_vector = plant_vector_factory("fir_gym.envs.carrier_motion:CarrierMotionEnv")
+van_der_pol = plant_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
+van_der_pol_vector = plant_vector_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
+pendulum_slider = plant_factory("fir_gym.envs.pendulum_slider:PendulumSliderEnv")
 
 #: Every environment id that ``import fir_gym`` registers.
-ENV_IDS: tuple[str, ...] = tuple(spec[0] for spec in _SPECS)
+ENV_IDS: tuple[str, ...] = (
+    "fir_gym/Orbit-v0",
+    "fir_gym/UncertainOscillator-v0",
+    "fir_gym/CarrierMotion-v0",
+    "fir_gym/VanDerPol-v0",
+    "fir_gym/PendulumSlider-v0",
+)
 #: The ids with a native (batched numpy) vector env.
-VECTOR_ENV_IDS: tuple[str, ...] = tuple(spec[0] for spec in _SPECS if spec[4])
-
-# Module attributes per plant (``orbit`` and ``orbit_vector``, ...), so that each
-# registered entry point is a plain string "fir_gym._registration:<name>".
-for _env_id, _name, _plant, _steps, _native in _SPECS:
-    globals()[_name] = plant_factory(_plant)
-    if _native:
-        globals()[_name + "_vector"] = plant_vector_factory(_plant)
+VECTOR_ENV_IDS: tuple[str, ...] = (
+    "fir_gym/Orbit-v0",
+    "fir_gym/UncertainOscillator-v0",
+    "fir_gym/CarrierMotion-v0",
+    "fir_gym/VanDerPol-v0",
+)
 
 
 def register_envs() -> None:
-    """Register every id in :data:`ENV_IDS` (idempotent)."""
-    for env_id, name, _plant, max_steps, native in _SPECS:
-        if env_id in gym.registry:
-            continue
-        gym.register(id=env_id, entry_point=f"fir_gym._registration:{name}",
-                     vector_entry_point=f"fir_gym._registration:{name}_vector" if native else None,
-                     max_episode_steps=max_steps)
+    """Register every id in :data:`ENV_IDS`; ids already registered are left alone.
+
+    ``import fir_gym`` calls it; calling it again (or importing the package in a
+    process that registered the ids otherwise) changes nothing and warns of nothing.
+    """
+    def register(**spec: Any) -> None:
+        if spec["id"] not in gym.registry:
+            gym.register(**spec)
+
+    # Paper 000, simulation 1: rectilinear orbit determination.
+    register(
+        id="fir_gym/Orbit-v0",
+        entry_point="fir_gym._registration:orbit",
+        vector_entry_point="fir_gym._registration:orbit_vector",
+        max_episode_steps=1000,
+    )
+    # Paper 000, simulation 2: the oscillator with a temporary model uncertainty.
+    register(
+        id="fir_gym/UncertainOscillator-v0",
+        entry_point="fir_gym._registration:uncertain_oscillator",
+        vector_entry_point="fir_gym._registration:uncertain_oscillator_vector",
+        max_episode_steps=500,
+    )
+    # Paper 001: aircraft-carrier motion at sea, sampled exactly.
+    register(
+        id="fir_gym/CarrierMotion-v0",
+        entry_point="fir_gym._registration:carrier_motion",
+        vector_entry_point="fir_gym._registration:carrier_motion_vector",
+        max_episode_steps=1000,
+    )
+    # Paper 002: the stochastic Van der Pol oscillator with a continuous measurement.
+    register(
+        id="fir_gym/VanDerPol-v0",
+        entry_point="fir_gym._registration:van_der_pol",
+        vector_entry_point="fir_gym._registration:van_der_pol_vector",
+        max_episode_steps=100,
+    )
+    # Paper 003: the pendulum on a spring-loaded slider (MuJoCo; no native vector env).
+    register(
+        id="fir_gym/PendulumSlider-v0",
+        entry_point="fir_gym._registration:pendulum_slider",
+        max_episode_steps=5000,
+    )

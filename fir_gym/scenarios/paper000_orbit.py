@@ -152,7 +152,7 @@ def _fill(report: Report, out: dict[str, Any]) -> None:
         f"Sim 1 horizon: the paper does not give Fig. 1's; we use k = 0..{K} measurement "
         "intervals (10⁴ in the full run: 100 time units, apogee r ≈ 38.8 at k ≈ 5 900; the body "
         "would reach r = 1 at k ≈ 11 770). The window counts measurements (10 measurements = "
-        "1000 Euler steps), as PAPERS.md §000 establishes.",
+        "1000 Euler steps), as docs/papers.md#000-sim-1-window establishes.",
         f"Sim 1: the EKF's own σ(x₁) falls to {ekf['sd1'][K]:.2g} while its actual RMS error over "
         f"the last 10 % of the horizon is {ekf['rms1_tail']:.2g} ({ekf['rms1_tail'] / tail_sd:.1f}"
         f"× its σ there); its NEES grows from {ekf['nees'][marks[0]]:.3g} at k = {marks[0]} to "

@@ -206,7 +206,8 @@ def _fill(report: Report, out: dict[str, Any]) -> None:
                    "error)", f"{PAPER_TABLE1['EFIRF']:g}", fl_p,
                    "the EFIR's own linearisation along its nominal, corrected Theorem 1 gain",
                    f"σ(x₁) = {sd.min():.2f}–{sd.max():.2f} per step (filter form: Σ = {fl_f:.2f}); "
-                   "the paper's EFIRF entry is below it: not reachable (PAPERS.md §000)")
+                   "the paper's EFIRF entry is below it: not reachable "
+                   "(docs/papers.md#000-table-1-floor)")
     rec = ", ".join(f"{n} {_fmt_recovery(st[n], K)}" for n in ("EFIRF", "LKF", "EKF", "UKF"))
     fast = st["EFIRF"]["recovery"] is not None and all(
         st[n]["recovery"] is None or st[n]["recovery"] > st["EFIRF"]["recovery"]

@@ -20,7 +20,7 @@ class Comparison:
     """One number of the paper beside ours: ``quantity | paper | ours | reading | note``.
 
     ``paper`` is ``None`` for a quantity the paper does not report (an experiment it
-    left open); ``reading`` names the reading of PAPERS.md the number uses; ``note``
+    left open); ``reading`` names the reading (docs/papers.md) the number uses; ``note``
     gives the reason for any difference (a bound, an ambiguity, an erratum).
     """
 

@@ -4,13 +4,13 @@
    x₁ RMSE of the EFIR (predictor form, open-loop nominal, as the paper) for
    windows N and of the EKF and UKF (P0 = 2 I) when the filters' μ is a fraction
    of the true one. A FIR window trades noise (falls with N) against model-error
-   bias (grows with N, PAPERS.md "UFIR"); an IIR filter without process noise
+   bias (grows with N, docs/papers.md#beyond-ufir); an IIR filter without process noise
    accumulates the bias instead.
 2. **Recovery after a temporary uncertainty** (UncertainOscillator-v0, printed
    reading): δ on k = 350..400 of several sizes; the number of steps after the last
    perturbed state until each filter's x₁ RMSE stays within 2× its pre-window level
    (:func:`.paper000_oscillator.recovery_time`). A FIR filter forgets within N
-   (PAPERS.md "Forgetting"); LKF, EKF and UKF are measured beside it.
+   (docs/papers.md#beyond-forgetting); LKF, EKF and UKF are measured beside it.
 
 Every grid cell is one task of the runner (the orbit cells get the shared,
 seeded measurements as arguments; the recovery cells simulate their own), so

@@ -97,7 +97,7 @@ def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.
 
 
 class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
-    """Replace the measurement observation by a state estimate (ARCHITECTURE.md, data flow).
+    """Replace the measurement observation by a state estimate (docs/architecture.md#data-flow).
 
     Args:
         env: a plant whose ``env.unwrapped.model`` is a

@@ -38,7 +38,8 @@ def test_noise_free_without_uncertainty_settles_at_0_48():
 
 
 def test_printed_reading_grows_about_12_6_percent_per_step():
-    """PAPERS.md: under the printed reading the truth grows ~12.6 %/step while δ = 0.15.
+    """Under the printed reading the truth grows ~12.6 %/step while δ = 0.15
+    (docs/papers.md#000-eq-29-readings).
 
     The homogeneous map is ``1.15 I + Δ [[0, 1], [-25, -5]]`` with eigenvalues
     ``1.125 ± 0.0433i``, modulus 1.1258. The norm of a rotating, non-normal state

@@ -28,7 +28,8 @@ def test_every_table_1_entry_is_beside_ours_under_both_readings(report):
 
 def test_efir_floor_matches_the_two_stage_gain_and_exceeds_the_paper():
     """The floor (path (a), the batch Theorem 1 gain) equals path (c) to round-off; it is far
-    above the paper's 3.3969 (PAPERS.md: ~0.36 per step, so a sum near 3.4 is unreachable)."""
+    above the paper's 3.3969 (docs/papers.md#000-table-1-floor: ~0.36 per step, so a sum
+    near 3.4 is unreachable)."""
     import gymnasium as gym
 
     model = gym.make(paper000_oscillator.ENV_ID).unwrapped.model
@@ -55,8 +56,9 @@ def test_rate_reading_efir_sits_at_the_floor(report):
 
 
 def test_efir_forgets_the_uncertainty_within_its_window(report):
-    """FIR forgetting (PAPERS.md): from k = 401 + N the predictor's window is clean, so its
-    error is back at its nominal level; the IIR filters are not back within N steps."""
+    """FIR forgetting (docs/papers.md#beyond-forgetting): from k = 401 + N the predictor's
+    window is clean, so its error is back at its nominal level; the IIR filters are not back
+    within N steps."""
     st = report.figures["oscillator"]["readings"]["state"]
     assert st["EFIRF"]["recovery"] <= paper000_oscillator.HORIZON
     assert st["EFIR filter form"]["recovery"] <= paper000_oscillator.HORIZON - 1
