@@ -157,7 +157,8 @@ class WindowBank:
         if prior is None:
             Fi, regular = spd_inverse(-Zs[:, n:, n:2 * n])
         else:
-            Fi = np.linalg.solve(np.eye(n) - prior @ Zs[:, n:, n:2 * n], prior)
+            Fi = np.linalg.solve(np.eye(n) - prior @ Zs[:, n:, n:2 * n], prior).astype(
+                np.float64, copy=False)
             regular = np.ones(Zs.shape[0], bool)
         b = Zs[:, n:, 2 * n:]                                   # (B, n, 1)
         if smoother:
@@ -197,7 +198,7 @@ def spd_inverse(F: FloatArray) -> tuple[FloatArray, np.ndarray]:
         if not ok.all():
             ok = information_is_regular(F)
             Fi = np.linalg.inv(np.where(ok[:, None, None], F, np.eye(n)))
-        return Fi, ok
+        return Fi.astype(np.float64, copy=False), ok
     if n == 1:
         det, adj = F[:, 0, 0], np.ones((nb, 1, 1))
     elif n == 2:

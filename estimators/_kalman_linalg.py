@@ -64,7 +64,7 @@ def cholesky(S: FloatArray) -> FloatArray:
     n_b, m, _ = S.shape
     if m > 3 and n_b < 32:
         try:
-            return np.linalg.cholesky(S)
+            return np.linalg.cholesky(S).astype(np.float64, copy=False)
         except np.linalg.LinAlgError:
             out = np.full_like(S, np.nan)
             for b in range(n_b):

@@ -46,13 +46,12 @@ class WindowedEstimator(Estimator):
         return {key: value.copy() if isinstance(value, np.ndarray) else value
                 for key, value in self._info.items()}
 
-    def _update(self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         return self._advance(y, None, valid)
 
-    def _predict_update(self, x: FloatArray, P: FloatArray | None, y: FloatArray,
-                        u: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         return self._advance(y, u, valid)
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
@@ -72,8 +71,7 @@ class WindowedEstimator(Estimator):
         self._pending = mask.copy() if self._pending is None else self._pending | mask
         self._age[mask] = 0
 
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         # the pass already treated the restarted systems as starting afresh
         return self._last_xP[0][idx], self._last_xP[1][idx], None

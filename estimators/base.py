@@ -13,8 +13,8 @@ An estimator is one object per filter, batched by design:
   The batch size is fixed by the prior (a batched ``x0`` or ``P0``) or, when the
   prior is unbatched, by the first batched measurement, to which the prior is
   broadcast. One system is held as a batch of one: it takes the same code.
-* ``x``, ``P`` (where defined), ``diverged`` and ``last_info`` are readable;
-  returned arrays are fresh copies.
+* ``x``, ``P``, ``diverged`` and ``last_info`` are readable; returned arrays are fresh
+  copies.
 * ``restart(systems)`` sends some systems of a batch back to their prior: their
   next ``step`` consumes a first measurement (update only) while the others
   predict and update as usual — what a vector env's autoreset needs.
@@ -75,8 +75,8 @@ class Estimator(ABC):
     :meth:`_predict_update` (later steps) on batched arrays ``x (B, n_x)``,
     ``P (B, n_x, n_x)``, ``y (B, n_y)``, ``u (B, n_u)`` and a boolean mask
     ``valid (B,)`` of systems whose measurement is usable. They return the new
-    ``x``, ``P`` (or ``None`` for filters without one) and the normalised
-    innovation squared per system (or ``None``).
+    ``x``, ``P`` and the normalised innovation squared per system (``None`` for filters
+    without one).
     """
 
     #: short registry name (``"kf"``, ``"efir"``, ...)
@@ -156,8 +156,14 @@ class Estimator(ABC):
         self._batch: int | None = sizes.pop() if sizes else None
         self._batched_prior = self._batch is not None
         self._x0, self._P0 = x0_, P0_
-        self._x: FloatArray | None = None
-        self._P: FloatArray | None = None
+        #: the state of every system; empty until the first step fixes the batch size
+        self._n_b = 0
+        self._x: FloatArray = np.empty((0, n))
+        self._P: FloatArray = np.empty((0, n, n))
+        self._diverged: np.ndarray = np.zeros(0, bool)
+        self._nis_run: np.ndarray = np.zeros(0, np.int64)
+        self._nis: FloatArray = np.zeros(0)
+        self._fresh: np.ndarray = np.zeros(0, bool)
         self._k = 0
         self._single = False
         self._restarting = False
@@ -174,9 +180,9 @@ class Estimator(ABC):
         Before the first step, or when every system restarts, this is :meth:`reset`
         with the same prior.
         """
-        if self._x is None:
+        if not self._n_b:
             return
-        n_b = self._x.shape[0]
+        n_b = self._n_b
         chosen = np.asarray(systems)
         mask = np.zeros(n_b, bool)
         try:
@@ -194,10 +200,9 @@ class Estimator(ABC):
             return
         n = self.model.n_x
         self._x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
-        if self._P is not None:
-            if self._P.shape[0] < n_b:                 # a shared covariance parts ways
-                self._P = np.repeat(self._P, n_b, axis=0)
-            self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
+        if self._P.shape[0] < n_b:                     # a shared covariance parts ways
+            self._P = np.repeat(self._P, n_b, axis=0)
+        self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
         self._diverged[mask] = False
         self._nis_run[mask] = 0
         self._fresh |= mask
@@ -227,31 +232,28 @@ class Estimator(ABC):
             self._restarting = False
         self._k += 1
         x = self._x
-        return x[0].copy() if self._single else x.copy()   # type: ignore[index, union-attr]
+        return x[0].copy() if self._single else x.copy()
 
     @property
     def x(self) -> FloatArray:
         """The current estimate (the prior mean before the first step); a copy."""
-        if self._x is None:
+        if not self._n_b:
             return self._x0.copy()
         return self._out(self._x)
 
     @property
-    def P(self) -> FloatArray | None:
-        """The current error covariance (or ``None`` where the filter has none); a copy."""
-        if self._x is None:
+    def P(self) -> FloatArray:
+        """The current error covariance (the prior's before the first step); a copy."""
+        if not self._n_b:
             return self._P0.copy()
-        if self._P is None:
-            return None
-        n_b = self._x.shape[0]
-        P = self._P if self._P.shape[0] == n_b else np.broadcast_to(self._P, (n_b,)
-                                                                     + self._P.shape[1:])
+        P = self._P if self._P.shape[0] == self._n_b else np.broadcast_to(
+            self._P, (self._n_b,) + self._P.shape[1:])
         return self._out(P)
 
     @property
     def diverged(self) -> bool | np.ndarray:
         """Sticky divergence flag: a bool, or a ``(B,)`` array for a batch."""
-        if self._x is None:
+        if not self._n_b:
             return False if not self._batched_prior else np.zeros(self._batch or 0, bool)
         return bool(self._diverged[0]) if self._single else self._diverged.copy()
 
@@ -264,7 +266,7 @@ class Estimator(ABC):
         without one) and the filter's own keys (e.g. the windowed filters'
         ``startup`` and ``rank_deficient``).
         """
-        if self._x is None or self._k == 0:
+        if not self._n_b or self._k == 0:
             return {}
         nis: Any = None
         if self.reports_nis:
@@ -290,9 +292,8 @@ class Estimator(ABC):
         """Hook: the filter's own entries of :attr:`last_info` (fresh copies)."""
         return {}
 
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
 
         The default calls :meth:`_update` on the sub-batch, which is right for filters
@@ -302,16 +303,13 @@ class Estimator(ABC):
         return self._update(x, P, y, valid)
 
     @abstractmethod
-    def _update(
-        self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
-    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """First step: measurement update of the prior with ``y[0]`` (numpy reference)."""
 
     @abstractmethod
-    def _predict_update(
-        self, x: FloatArray, P: FloatArray | None, y: FloatArray, u: FloatArray,
-        valid: np.ndarray,
-    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Later steps: predict with ``u[k-1]``, then update with ``y[k]`` (numpy reference)."""
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
@@ -328,17 +326,15 @@ class Estimator(ABC):
     def _numpy_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
         with np.errstate(all="ignore"):
             if self._k == 0:
-                x, P, nis = self._update(self._x, self._P, Y, valid)  # type: ignore[arg-type]
+                x, P, nis = self._update(self._x, self._P, Y, valid)
             else:
                 x_prior, P_prior = self._x, self._P
-                x, P, nis = self._predict_update(x_prior, P_prior, Y,  # type: ignore[arg-type]
-                                                 U, valid)
+                x, P, nis = self._predict_update(x_prior, P_prior, Y, U, valid)
                 if self._restarting:
-                    x, P, nis = self._first_steps(x, P, nis, x_prior,  # type: ignore[arg-type]
-                                                  P_prior, Y, valid)
+                    x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
             self._accept(x, P, nis, valid)
 
-    def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
+    def _accept(self, x: FloatArray, P: FloatArray, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
         """The divergence watch (module docstring): store the new estimate where it is
         finite, keep the last finite one elsewhere, and book every system.
@@ -349,49 +345,38 @@ class Estimator(ABC):
         covariance shared by the batch (``P`` of one row) is stored where it is finite.
         """
         n = x.shape[1]
-        fine = math.isfinite(x.sum())
-        if fine and P is not None:
-            fine = bool(abs(P).max() * n <= self.max_covariance_trace)
+        fine = math.isfinite(x.sum()) and bool(abs(P).max() * n <= self.max_covariance_trace)
         if fine and nis is not None:
             fine = bool(nis.max() <= self._nis_threshold) and not self._nis_run.any()
         if fine:
             self._x = _owned(x)
-            self._P = None if P is None else _owned(P)
+            self._P = _owned(P)
             self._nis[:] = np.nan if nis is None else nis
             return
-        finite = np.all(np.isfinite(x), axis=1)
-        blown = ~finite
-        if P is not None:
-            finite_P = np.all(np.isfinite(P), axis=(1, 2))
-            finite &= finite_P
-            trace = np.trace(P, axis1=1, axis2=2)
-            blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
+        finite_P = np.all(np.isfinite(P), axis=(1, 2))
+        finite = np.all(np.isfinite(x), axis=1) & finite_P
+        trace = np.trace(P, axis1=1, axis2=2)
+        blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
         if nis is not None:
             high = valid & ~(nis <= self._nis_threshold)      # NaN counts as above
             self._nis_run = np.where(high, self._nis_run + 1, 0)
             blown |= self._nis_run >= self.nis_patience
         self._diverged |= blown
         self._x = np.where(finite[:, None], x, self._x)
-        if P is not None:
-            keep = finite_P if P.shape[0] < x.shape[0] else finite
-            self._P = np.where(keep[:, None, None], P, self._P)
-        else:
-            self._P = None
+        keep = finite_P if P.shape[0] < x.shape[0] else finite
+        self._P = np.where(keep[:, None, None], P, self._P)
         self._nis[:] = np.nan if nis is None else nis
 
-    def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
-                     x_prior: FloatArray, P_prior: FloatArray | None, Y: FloatArray,
-                     valid: np.ndarray) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    def _first_steps(self, x: FloatArray, P: FloatArray, nis: FloatArray | None,
+                     x_prior: FloatArray, P_prior: FloatArray, Y: FloatArray, valid: np.ndarray
+                     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Replace the rows of restarted systems by their first step (an update only)."""
         idx = np.flatnonzero(self._fresh)
-        xs, Ps, ns = self._update_systems(idx, x_prior[idx],
-                                          None if P_prior is None else P_prior[idx],
-                                          Y[idx], valid[idx])
+        xs, Ps, ns = self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx], valid[idx])
         x = np.array(x)
         x[idx] = xs
-        if P is not None and Ps is not None:
-            P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
-            P[idx] = Ps
+        P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+        P[idx] = Ps
         if nis is not None:
             nis = np.array(nis)
             nis[idx] = np.nan if ns is None else ns
@@ -425,10 +410,10 @@ class Estimator(ABC):
         Y = as_batch("y", y, n_y)                      # raises on a wrong shape
         single = Y.ndim == 1
         Y = Y.reshape(1, n_y) if single else Y
-        if self._x is None:
+        if not self._n_b:
             self._ensure_batch(Y.shape[0], single)
-        elif Y.shape[0] != self._x.shape[0] or single != self._single:
-            want = f"({n_y},)" if self._single else f"({self._x.shape[0]}, {n_y})"
+        elif Y.shape[0] != self._n_b or single != self._single:
+            want = f"({n_y},)" if self._single else f"({self._n_b}, {n_y})"
             raise ValueError(f"y must have shape {want} like the earlier measurements; got "
                              f"{'a single measurement' if single else f'a batch of {len(Y)}'}")
         return Y
@@ -454,6 +439,7 @@ class Estimator(ABC):
             raise ValueError(f"y must have shape ({self._batch}, {self.model.n_y}) to match the "
                              f"batched prior; got {'a single measurement' if single else n_batch}")
         self._single = single and self._batch is None
+        self._n_b = n_batch
         self._y_shape = (self._n_y,) if self._single else (n_batch, self._n_y)
         n = self.model.n_x
         self._x = np.array(np.broadcast_to(self._x0, (n_batch, n)), order="C")

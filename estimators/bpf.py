@@ -128,7 +128,7 @@ def bpf_riccati_step(P: ArrayLike, M: ArrayLike, h: float) -> RiccatiStep:
     half = 0.5 * h * M
     E_minus = np.eye(2 * n) - half
     coef = xi + half @ xi
-    end = np.linalg.solve(E_minus, coef)
+    end = _solve(E_minus, coef)
     P_next, c_end = _ratio(end)
     P_bar, c_bar = _ratio(coef)
     condition = np.maximum(_cond(E_minus), np.maximum(c_end, c_bar))
@@ -209,7 +209,7 @@ def bpf_state_step(x: ArrayLike, M: ArrayLike, b: ArrayLike, h: float) -> FloatA
 def _solve(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a⁻¹ b`` for stacks; a system whose ``a`` is exactly singular gets NaN (flagged later)."""
     try:
-        return np.linalg.solve(a, b)
+        return np.linalg.solve(a, b).astype(np.float64, copy=False)
     except np.linalg.LinAlgError:
         shape = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
         a = np.broadcast_to(a, shape + a.shape[-2:])
@@ -337,6 +337,7 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
 
     def _global(self, restarted: RiccatiStep, M: FloatArray, h: float) -> RiccatiStep:
         """The global recursion where it is still well conditioned; the restart elsewhere."""
+        assert self._psi is not None and self._xi0 is not None and self._broken is not None
         psi, step = bpf_riccati_global_step(self._psi, M, self._xi0, h)
         fine = ~self._broken & (step.condition <= self.max_condition)
         for arr in (step.P_next, step.P_bar):

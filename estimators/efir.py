@@ -162,6 +162,7 @@ class ExtendedFIRFilter(WindowedEstimator):
             start = self._no_startup
         w_out = max(0, k - L + filt) % L               # the oldest window: read out now
         if k:                                          # nominal and perturbation time update
+            assert u is not None
             nom = self._nom.reshape(-1, n)
             uu = u if self._nom.ndim == 2 else np.repeat(u, L, axis=0)
             nom_next, A = self._linearize(nom, uu)      # f and F in one pass of the plant

@@ -118,7 +118,7 @@ class ExtendedKalmanFilter(Estimator):
         x = self._x
         with np.errstate(all="ignore"):
             hx, H = self._h(x), self._H(x)
-        self._kalman_step(x, self._identity, y, hx, H, valid)  # type: ignore[arg-type]
+        self._kalman_step(x, self._identity, y, hx, H, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:

@@ -80,6 +80,7 @@ class FIRSmoother(FIRFilter):
         if prev is None or start.all():
             return x0, P0
         m = self._evicted                                  # matrices at time k − L
+        assert m is not None
         Z, _ = self._window_data(self._slots)
         u_old = Z[:, 0, self._p:]                          # u[k − L]
         x = self._x @ m.A.T + u_old @ m.B.T

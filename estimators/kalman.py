@@ -20,7 +20,7 @@ nominal trajectory run open loop from the filter's initial state.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -29,7 +29,7 @@ from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, sy
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
-from .model import StateSpaceModel
+from .model import StateSpaceModel, SystemMatrices
 from .registry import register_estimator
 
 __all__ = ["Innovation", "KalmanFilter", "LinearizedKalmanFilter", "kf_predict", "kf_update"]
@@ -267,7 +267,9 @@ class KalmanFilter(Estimator):
                             np.ascontiguousarray(R))
 
     def _matrices(self, k: int) -> StepMatrices:
-        return self._mats if self._constant else self._prepare(self.model.matrices(k))
+        if self._constant:
+            return self._mats
+        return self._prepare(cast(_Scheduled, self.model).matrices(k))
 
     def _reset_state(self) -> None:
         #: [steady state now, may settle (a time-invariant model)]; with the gains of the
@@ -357,6 +359,12 @@ class KalmanFilter(Estimator):
                                     self._nis_run, self._nis, self._limits)
 
 
+class _Scheduled(Protocol):
+    """A linear model with matrices at each time (``LinearModel``, ``TimeVaryingLinearModel``)."""
+
+    def matrices(self, k: int = 0) -> SystemMatrices: ...
+
+
 class StepMatrices(NamedTuple):
     """A linear model's matrices as a filter step uses them: ``A, B, C``, ``Qd = G Q Gᵀ``, ``R``."""
 
@@ -396,11 +404,13 @@ class LinearizedKalmanFilter(Estimator):
     name = "lkf"
     has_compiled_step = True
 
+    _x_nom: FloatArray
+
     def _init_batch(self, n_batch: int) -> None:
-        self._x_nom = self._x.copy()                   # type: ignore[union-attr]
+        self._x_nom = self._x.copy()
 
     def _reset_state(self) -> None:
-        self._x_nom: FloatArray | None = None
+        self._x_nom = np.empty((0, self.model.n_x))
         self._GQGt = self.model.GQGT
         self._R_batch = self.model.R[None]
 
@@ -416,13 +426,11 @@ class LinearizedKalmanFilter(Estimator):
         self._x_nom = model.f(self._x_nom, u)
         return self._correct(dx, P, y, valid)
 
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
+                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
         # a restarted system's nominal path starts again at its prior
-        self._x_nom[idx] = x                           # type: ignore[index]
-        return self._correct(np.zeros_like(x), P, y, valid,  # type: ignore[arg-type]
-                             self._x_nom[idx])          # type: ignore[index]
+        self._x_nom[idx] = x
+        return self._correct(np.zeros_like(x), P, y, valid, self._x_nom[idx])
 
     def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
                  x_nom: FloatArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -430,7 +438,7 @@ class LinearizedKalmanFilter(Estimator):
         H = self.model.H(x_nom)
         e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
         dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
-        return x_nom + dx, P, nis                      # type: ignore[operator]
+        return x_nom + dx, P, nis
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         self._compiled_step(y, self._no_input, valid, predict=False)
@@ -442,7 +450,6 @@ class LinearizedKalmanFilter(Estimator):
     def _compiled_step(self, y: FloatArray, u: FloatArray, valid: np.ndarray, predict: bool
                        ) -> None:
         model, x, nom = self.model, self._x, self._x_nom
-        assert x is not None and nom is not None
         with np.errstate(all="ignore"):
             if predict:                                # the nominal moves on, open loop
                 F = model.F(nom, u)
@@ -464,7 +471,7 @@ class LinearizedKalmanFilter(Estimator):
     @property
     def x_nominal(self) -> FloatArray | None:
         """The nominal trajectory's current point (``None`` before the first step)."""
-        if self._x_nom is None:
+        if not self._n_b:
             return None
         return self._x_nom[0].copy() if self._single else self._x_nom.copy()
 

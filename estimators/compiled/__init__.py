@@ -41,6 +41,7 @@ import os
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
+numba: Any
 try:  # pragma: no cover - exercised by whichever of the two installs runs the tests
     import numba
 except ImportError:  # pragma: no cover

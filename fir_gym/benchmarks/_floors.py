@@ -3,8 +3,8 @@
 Each is one call, timed in the same alternating blocks as what it bounds:
 :func:`numpy_path` (a step with the compiled kernels off), :func:`mujoco_stepper`
 (MuJoCo's own steps of one PendulumSlider-v0 env step), :func:`trivial_ekf_step`
-(the filter's fixed cost) and :func:`model_evaluation` (what an EKF step must evaluate
-of a plant's model).
+(the filter's fixed cost), :func:`trivial_ekf_kernel` (that step's compiled kernel
+alone) and :func:`model_evaluation` (what an EKF step must evaluate of a plant's model).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def mujoco_stepper(friction: str) -> Any:
     """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
     from fir_gym.envs import _mujoco_passive
 
-    env = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
+    env: Any = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
     env.reset(seed=0)
     m, d, law = env.mj_model, env.mj_data, env._friction_law
     nstep, callback = env.params["frame_skip"], None if law is None else law.callback
@@ -49,7 +49,26 @@ def trivial_ekf_step(n_batch: int) -> Any:
     ekf = ExtendedKalmanFilter(model, x0=np.zeros((n_batch, 1)))
     y = np.zeros((n_batch, 1))
     ekf.step(y)
-    return lambda: ekf.step(y)
+
+    def step() -> Any:
+        return ekf.step(y)
+    step.estimator = ekf                                  # type: ignore[attr-defined]
+    return step
+
+
+def trivial_ekf_kernel(n_batch: int) -> Any:
+    """The compiled kernel of :func:`trivial_ekf_step`'s step called alone, with the arguments
+    that step hands it (``compiled.kalman.predict_update``; its numba dispatch included)."""
+    from fir_gym.estimators.compiled import kalman
+
+    step = trivial_ekf_step(n_batch)
+    ekf = step.estimator
+    x, one = ekf._x, np.ones((n_batch, 1, 1))
+    y = np.zeros((n_batch, 1))
+    args = (x, ekf._P, x.copy(), one, ekf._GQGt, y, x.copy(), one, ekf._R_batch,
+            ekf._all_valid, ekf._all_predict, ekf._diverged, ekf._nis_run, ekf._nis,
+            ekf._limits)
+    return lambda: kalman.predict_update(*args)
 
 
 def model_evaluation(estimator: Any) -> Any:
