@@ -13,8 +13,8 @@ An estimator is one object per filter, batched by design:
   The batch size is fixed by the prior (a batched ``x0`` or ``P0``) or, when the
   prior is unbatched, by the first batched measurement, to which the prior is
   broadcast. One system is held as a batch of one: it takes the same code.
-* ``x``, ``P``, ``diverged`` and ``last_info`` are readable; returned arrays are fresh
-  copies.
+* ``x``, ``P`` (where defined), ``diverged`` and ``last_info`` are readable; returned
+  arrays are fresh copies.
 * ``restart(systems)`` sends some systems of a batch back to their prior: their
   next ``step`` consumes a first measurement (update only) while the others
   predict and update as usual — what a vector env's autoreset needs.
@@ -75,8 +75,8 @@ class Estimator(ABC):
     :meth:`_predict_update` (later steps) on batched arrays ``x (B, n_x)``,
     ``P (B, n_x, n_x)``, ``y (B, n_y)``, ``u (B, n_u)`` and a boolean mask
     ``valid (B,)`` of systems whose measurement is usable. They return the new
-    ``x``, ``P`` and the normalised innovation squared per system (``None`` for filters
-    without one).
+    ``x``, ``P`` (``None`` for a filter without covariance, ``provides_covariance``
+    False) and the normalised innovation squared per system (or ``None``).
     """
 
     #: short registry name (``"kf"``, ``"efir"``, ...)
@@ -242,10 +242,13 @@ class Estimator(ABC):
         return self._out(self._x)
 
     @property
-    def P(self) -> FloatArray:
-        """The current error covariance (the prior's before the first step); a copy."""
+    def P(self) -> FloatArray | None:
+        """The current error covariance (the prior's before the first step; ``None`` for a
+        filter without one, ``provides_covariance`` False); a copy."""
         if not self._n_b:
             return self._P0.copy()
+        if not self.provides_covariance:
+            return None
         P = self._P if self._P.shape[0] == self._n_b else np.broadcast_to(
             self._P, (self._n_b,) + self._P.shape[1:])
         return self._out(P)
@@ -293,7 +296,8 @@ class Estimator(ABC):
         return {}
 
     def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                        valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
 
         The default calls :meth:`_update` on the sub-batch, which is right for filters
@@ -304,12 +308,13 @@ class Estimator(ABC):
 
     @abstractmethod
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """First step: measurement update of the prior with ``y[0]`` (numpy reference)."""
 
     @abstractmethod
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                        valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """Later steps: predict with ``u[k-1]``, then update with ``y[k]`` (numpy reference)."""
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
@@ -334,7 +339,7 @@ class Estimator(ABC):
                     x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
             self._accept(x, P, nis, valid)
 
-    def _accept(self, x: FloatArray, P: FloatArray, nis: FloatArray | None,
+    def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
         """The divergence watch (module docstring): store the new estimate where it is
         finite, keep the last finite one elsewhere, and book every system.
@@ -345,38 +350,45 @@ class Estimator(ABC):
         covariance shared by the batch (``P`` of one row) is stored where it is finite.
         """
         n = x.shape[1]
-        fine = math.isfinite(x.sum()) and bool(abs(P).max() * n <= self.max_covariance_trace)
+        fine = math.isfinite(x.sum()) and (
+            P is None or bool(abs(P).max() * n <= self.max_covariance_trace))
         if fine and nis is not None:
             fine = bool(nis.max() <= self._nis_threshold) and not self._nis_run.any()
         if fine:
             self._x = _owned(x)
-            self._P = _owned(P)
+            if P is not None:
+                self._P = _owned(P)
             self._nis[:] = np.nan if nis is None else nis
             return
-        finite_P = np.all(np.isfinite(P), axis=(1, 2))
-        finite = np.all(np.isfinite(x), axis=1) & finite_P
-        trace = np.trace(P, axis1=1, axis2=2)
-        blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
+        finite = np.all(np.isfinite(x), axis=1)
+        blown = ~finite
+        if P is not None:                              # (a filter without covariance: None)
+            finite_P = np.all(np.isfinite(P), axis=(1, 2))
+            finite &= finite_P
+            trace = np.trace(P, axis1=1, axis2=2)
+            blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
         if nis is not None:
             high = valid & ~(nis <= self._nis_threshold)      # NaN counts as above
             self._nis_run = np.where(high, self._nis_run + 1, 0)
             blown |= self._nis_run >= self.nis_patience
         self._diverged |= blown
         self._x = np.where(finite[:, None], x, self._x)
-        keep = finite_P if P.shape[0] < x.shape[0] else finite
-        self._P = np.where(keep[:, None, None], P, self._P)
+        if P is not None:
+            keep = finite_P if P.shape[0] < x.shape[0] else finite
+            self._P = np.where(keep[:, None, None], P, self._P)
         self._nis[:] = np.nan if nis is None else nis
 
-    def _first_steps(self, x: FloatArray, P: FloatArray, nis: FloatArray | None,
+    def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                      x_prior: FloatArray, P_prior: FloatArray, Y: FloatArray, valid: np.ndarray
-                     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """Replace the rows of restarted systems by their first step (an update only)."""
         idx = np.flatnonzero(self._fresh)
         xs, Ps, ns = self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx], valid[idx])
         x = np.array(x)
         x[idx] = xs
-        P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
-        P[idx] = Ps
+        if P is not None and Ps is not None:
+            P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+            P[idx] = Ps
         if nis is not None:
             nis = np.array(nis)
             nis[idx] = np.nan if ns is None else ns
