@@ -55,6 +55,20 @@ def cho_solve(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> None:
 
 
 @jit
+def times_rows(M: np.ndarray, mb: int, mw: int, Z: np.ndarray, b: int, w: int,
+               out: np.ndarray) -> None:
+    """``out = M[mb, mw] [P | T | x̄]`` — the matrix times the first ``n`` rows of window
+    ``w`` of system ``b``."""
+    for i in range(M.shape[2]):
+        for j in range(out.shape[1]):
+            out[i, j] = 0.0
+        for k in range(M.shape[3]):
+            c = M[mb, mw, i, k]
+            for j in range(out.shape[1]):
+                out[i, j] += c * Z[b, k, w, j]
+
+
+@jit
 def predict(Z: np.ndarray, A: np.ndarray, Bu: np.ndarray, Q: np.ndarray,
             has_Bu: bool, has_Q: bool, size: tuple[int, ...]) -> None:
     """``x̄ ← A x̄ (+ B u)``, ``T ← A T``, ``P ← A P Aᵀ (+ G Q Gᵀ)`` of every window, in place."""
@@ -66,13 +80,7 @@ def predict(Z: np.ndarray, A: np.ndarray, Bu: np.ndarray, Q: np.ndarray,
         ab, qb = b if A.shape[0] > 1 else 0, b if Q.shape[0] > 1 else 0
         for w in range(W):
             aw = w if A.shape[1] > 1 else 0
-            for i in range(n):                              # A [P | T | x̄]
-                for j in range(m):
-                    tmp[i, j] = 0.0
-                for k in range(n):
-                    a = A[ab, aw, i, k]
-                    for j in range(m):
-                        tmp[i, j] += a * Z[b, k, w, j]
+            times_rows(A, ab, aw, Z, b, w, tmp)             # A [P | T | x̄]
             for i in range(n):
                 for j in range(m):
                     Z[b, i, w, j] = tmp[i, j]
@@ -107,13 +115,8 @@ def update(Z: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray,
         cb = b if C.shape[0] > 1 else 0
         for w in range(W):
             cw, yw = w if C.shape[1] > 1 else 0, w if y.shape[1] > 1 else 0
-            for q in range(p):                              # r = C [P | T | x̄] − [0 | 0 | y]
-                for j in range(m):
-                    r[q, j] = 0.0
-                for k in range(n):
-                    c = C[cb, cw, q, k]
-                    for j in range(m):
-                        r[q, j] += c * Z[b, k, w, j]
+            times_rows(C, cb, cw, Z, b, w, r)               # r = C [P | T | x̄] − [0 | 0 | y]
+            for q in range(p):
                 r[q, m - 1] -= y[b, yw, q]
             if p == 1:                                      # [K; W]ᵀ = Σ⁻¹ [C P | C T]
                 s = 0.0
