@@ -14,7 +14,7 @@ finite differences (:meth:`StateSpaceModel.F`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
-from .kalman import predict_covariance, update_kernel
+from .kalman import LinearGains, StepMatrices, predict_covariance, update_kernel
 from .model import LinearModel, StateSpaceModel
 from .registry import register_estimator
 
@@ -70,7 +70,8 @@ class ExtendedKalmanFilter(Estimator):
     :func:`~.compiled.kalman.predict_update`; on a plain :class:`LinearModel` — where
     ``f = A x + B u``, ``F = A``, ``h = C x``, ``H = C`` and the EKF is the Kalman filter —
     it runs :func:`~.compiled.kalman.linear_step` on the matrices instead of calling the
-    model (each system keeps its own ``P``; no steady-state shortcut).
+    model, with the KF's exact shared covariance (systems started from one prior; their
+    covariance recursion does not depend on the data) and no steady-state shortcut.
     """
 
     name = "ekf"
@@ -91,9 +92,14 @@ class ExtendedKalmanFilter(Estimator):
     def _init_batch(self, n_batch: int) -> None:
         n, m = self.model.n_x, self.model.n_y
         self._identity = np.eye(n)[None]
-        #: the compiled linear step's scratch for the gains, and its regime (never steady)
-        self._gain_K, self._gain_W = np.zeros((n, m, n_batch)), np.zeros((m, m, n_batch))
-        self._regime = np.zeros(2, dtype=np.int64)
+        if self._plain_linear:
+            model = cast(LinearModel, self.model)
+            self._mats = StepMatrices(model.A, model.B, model.C, self._GQGt, model.R)
+            self._gains = LinearGains(n, m, may_settle=False)   # no steady-state shortcut
+            if self._P0.ndim == 2:
+                # the covariance recursion of a linear model does not depend on the data:
+                # systems started from one prior share it (the KF's exact shortcut)
+                self._P = self._P0[None].copy()
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
@@ -113,7 +119,7 @@ class ExtendedKalmanFilter(Estimator):
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         if self._plain_linear:
-            self._linear_step(y, self._no_input, valid)
+            self._gains.step(self, self._mats, self._mats, self._no_input, y, valid)
             return
         x = self._x
         with np.errstate(all="ignore"):
@@ -123,7 +129,7 @@ class ExtendedKalmanFilter(Estimator):
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
         if self._plain_linear:
-            self._linear_step(y, u, valid)
+            self._gains.step(self, self._mats, self._mats, u, y, valid)
             return
         x = self._x
         with np.errstate(all="ignore"):
@@ -142,13 +148,6 @@ class ExtendedKalmanFilter(Estimator):
             H if H.ndim == 3 else H[None], self._R_batch, valid, self._predicting(),
             self._diverged, self._nis_run, self._nis, self._limits)
 
-    def _linear_step(self, y: FloatArray, u: FloatArray, valid: np.ndarray) -> None:
-        """:func:`~.compiled.kalman.linear_step` on a plain :class:`LinearModel`'s matrices."""
-        m = self.model
-        compiled_kalman.linear_step(self._x, self._P, m.A, m.B, u, m.C,  # type: ignore[attr-defined]
-                                    self._GQGt, m.R, y, valid, self._predicting(),
-                                    self._gain_K, self._gain_W, self._regime, self._diverged,
-                                    self._nis_run, self._nis, self._limits)
 
 
 def _is_plain_linear(model: StateSpaceModel, f: Any, F: Any, h: Any, H: Any) -> bool:

@@ -272,24 +272,19 @@ class KalmanFilter(Estimator):
         return self._prepare(cast(_Scheduled, self.model).matrices(k))
 
     def _reset_state(self) -> None:
-        #: [steady state now, may settle (a time-invariant model)]; with the gains of the
-        #: steady state, ``K`` and ``S⁻¹`` of each row of ``P``, held as blocks ``(n, m, rows)``
-        #: (:mod:`.compiled.linalg`)
-        self._regime = np.array([0, int(self._constant)], dtype=np.int64)
-        self._gain_K = np.zeros((self.model.n_x, self.model.n_y, 0))
-        self._gain_W = np.zeros((self.model.n_y, self.model.n_y, 0))
+        self._gains = LinearGains(self.model.n_x, self.model.n_y, self._constant)
 
     def _init_batch(self, n_batch: int) -> None:
         if self._P0.ndim == 2:                         # one covariance for the whole batch
             self._P = self._P0[None].copy()
 
     def _restart_systems(self, mask: np.ndarray) -> None:
-        self._regime[0] = 0
+        self._gains.regime[0] = 0
 
     @property
     def steady_state(self) -> bool:
         """Whether the filter is in the steady-state regime (``P``, ``K``, ``S⁻¹`` kept)."""
-        return bool(self._regime[0])
+        return bool(self._gains.regime[0])
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
@@ -301,20 +296,21 @@ class KalmanFilter(Estimator):
         A, B, _, Qd, _ = self._matrices(self._k - 1)
         x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
         every = valid is self._all_valid and not self._restarting
-        if self._regime[0] and every:                  # steady state: P, K, S⁻¹ kept
-            K, W = self._gain_K.transpose(2, 0, 1), self._gain_W.transpose(2, 0, 1)
+        gains = self._gains
+        if gains.regime[0] and every:                  # steady state: P, K, S⁻¹ kept
+            K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
             x, nis = correct(x, y - x @ self._mats.C.T, K, W)
-            self._regime[0] = int(bool(np.isfinite(x).all()))
+            gains.regime[0] = int(bool(np.isfinite(x).all()))
             return x, P, nis
-        self._regime[0] = 0
+        gains.regime[0] = 0
         mats = self._matrices(self._k)
         x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
                                                 mats)
-        if (self._regime[1] and every and _converged(P_new, P)
+        if (gains.regime[1] and every and _converged(P_new, P)
                 and np.isfinite(x_new).all() and np.isfinite(P_new).all()):
-            self._regime[0] = 1
-            self._gain_K = np.ascontiguousarray(K.transpose(1, 2, 0))
-            self._gain_W = np.ascontiguousarray(W.transpose(1, 2, 0))
+            gains.regime[0] = 1
+            gains.K = np.ascontiguousarray(K.transpose(1, 2, 0))
+            gains.W = np.ascontiguousarray(W.transpose(1, 2, 0))
         return x_new, P_new, nis
 
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
@@ -335,28 +331,45 @@ class KalmanFilter(Estimator):
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         mats = self._matrices(0)
-        self._linear_step(mats, mats, self._no_input, y, valid)
+        self._gains.step(self, mats, mats, self._no_input, y, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
-        self._linear_step(self._matrices(self._k - 1), self._matrices(self._k), u, y, valid)
+        self._gains.step(self, self._matrices(self._k - 1), self._matrices(self._k), u, y,
+                         valid)
 
-    def _linear_step(self, prediction: StepMatrices, update: StepMatrices, u: FloatArray,
-                     y: FloatArray, valid: np.ndarray) -> None:
-        x, P = self._x, self._P
-        assert x is not None and P is not None
-        if valid is not self._all_valid:               # a missing measurement: no shortcuts
-            self._regime[0] = 0
+
+class LinearGains:
+    """The compiled step of a filter on a linear model's matrices, and what it keeps.
+
+    Used by :class:`KalmanFilter` and by the EKF on a plain :class:`LinearModel`:
+    :func:`~.compiled.kalman.linear_step` on the filter's state, with ``K`` and ``S⁻¹`` of
+    each row of ``P`` held as blocks (``K (n, m, rows)``, ``W (m, m, rows)``) and the
+    ``regime`` ``[steady now, may settle]`` (a time-invariant model's KF may settle).
+    A missing measurement gives every system its own covariance and leaves the regime.
+    """
+
+    def __init__(self, n: int, m: int, may_settle: bool) -> None:
+        self.K, self.W = np.zeros((n, m, 0)), np.zeros((m, m, 0))
+        self.regime = np.array([0, int(may_settle)], dtype=np.int64)
+
+    def step(self, flt: Estimator, prediction: StepMatrices, update: StepMatrices,
+             u: FloatArray, y: FloatArray, valid: np.ndarray) -> None:
+        """One step of ``flt``: predict with ``prediction``'s matrices, update with
+        ``update``'s."""
+        x, P = flt._x, flt._P
+        if valid is not flt._all_valid:                # a missing measurement: no shortcuts
+            self.regime[0] = 0
             if P.shape[0] < x.shape[0]:
-                P = self._P = np.repeat(P, x.shape[0], axis=0)
-        if self._gain_K.shape[2] != P.shape[0]:
-            self._regime[0] = 0
-            self._gain_K = np.zeros(self._gain_K.shape[:2] + P.shape[:1])
-            self._gain_W = np.zeros(self._gain_W.shape[:2] + P.shape[:1])
+                P = flt._P = np.repeat(P, x.shape[0], axis=0)
+        if self.K.shape[2] != P.shape[0]:
+            self.regime[0] = 0
+            self.K = np.zeros(self.K.shape[:2] + P.shape[:1])
+            self.W = np.zeros(self.W.shape[:2] + P.shape[:1])
         compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
-                                    prediction.Qd, update.R, y, valid, self._predicting(),
-                                    self._gain_K, self._gain_W, self._regime, self._diverged,
-                                    self._nis_run, self._nis, self._limits)
+                                    prediction.Qd, update.R, y, valid, flt._predicting(),
+                                    self.K, self.W, self.regime, flt._diverged, flt._nis_run,
+                                    flt._nis, flt._limits)
 
 
 class _Scheduled(Protocol):

@@ -162,6 +162,11 @@ def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
     ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then the watch."""
     n_b, n = x.shape
     m = y.shape[1]
+    if not (P.shape[0] == xp.shape[0] == y.shape[0] == hx.shape[0] == valid.shape[0]
+            == predict.shape[0] == diverged.shape[0] == nis_run.shape[0] == nis.shape[0] == n_b
+            and F.shape[0] in (1, n_b) and H.shape[0] in (1, n_b) and R.shape[0] in (1, n_b)):
+        raise ValueError("predict_update: the arrays must have a row per system (F, H, R: "
+                         "one row for all)")
     c = min(CHUNK, n_b)
     Ps, Fs, FP, Pm, Qs, IKH, T, U, Hs, PHt, K, KR, Rs, S, W, L = scratch(n, m, c)
     ok = np.empty(c, dtype=np.bool_)
@@ -209,6 +214,11 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
     """
     n_b, n = x.shape
     n_p, m, n_u = P.shape[0], y.shape[1], u.shape[1]
+    if not (n_p in (1, n_b) and gain_K.shape[2] == gain_W.shape[2] == n_p
+            and u.shape[0] in (1, n_b) and y.shape[0] == valid.shape[0] == predict.shape[0]
+            == diverged.shape[0] == nis_run.shape[0] == nis.shape[0] == n_b):
+        raise ValueError("linear_step: the arrays must have a row per system (P and the gains: "
+                         "or one row for all; u: or one for all)")
     steady = regime[0] == 1
     Pm_all, Pp_all = np.empty((n, n, n_p)), np.empty((n, n, n_p))
     ok_all = np.ones(n_p, dtype=np.bool_)

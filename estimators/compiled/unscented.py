@@ -206,6 +206,10 @@ def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
     then the watch, written into ``x``, ``P`` (which may be ``x_pred``, ``P_pred``)."""
     n_b, _, n = X.shape
     m = Z.shape[2]
+    if not (x_pred.shape[0] == P_pred.shape[0] == Z.shape[0] == y.shape[0] == valid.shape[0]
+            == x.shape[0] == P.shape[0] == diverged.shape[0] == nis_run.shape[0]
+            == nis.shape[0] == n_b):
+        raise ValueError("update: the arrays must have a row per system")
     _, y_hat, Pxz = cross_moments(X, Z, Wm, Wc, False)
     _, _, S_all = cross_moments(Z, Z, Wm, Wc, True)
     c = min(CHUNK, n_b)

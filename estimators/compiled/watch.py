@@ -36,6 +36,9 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
     """Store ``x_new (B, n)``, ``P_new (B, n, n)`` into ``x``, ``P`` where finite, and book every
     system (``nis_new`` is ignored without ``has_nis``)."""
     n_b, n = x_new.shape
+    if not (P_new.shape[0] == x.shape[0] == P.shape[0] == valid.shape[0] == diverged.shape[0]
+            == nis_run.shape[0] == nis.shape[0] == n_b and nis_new.shape[0] in (0, n_b)):
+        raise ValueError("accept: the arrays must have a row per system")
     for b in range(n_b):
         finite = True
         trace = 0.0

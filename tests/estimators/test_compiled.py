@@ -121,8 +121,8 @@ def test_the_watch_equals_the_numpy_accept():
 
     model = LinearModel(A=np.eye(2), C=[[1.0, 0.0]], Q=np.eye(2), R=[[1.0]])
     B = 12
-    a = ExtendedKalmanFilter(model, x0=np.zeros((B, 2)), nis_patience=2,
-                             max_covariance_trace=50.0)
+    a = ExtendedKalmanFilter(model, x0=np.zeros((B, 2)), P0=np.repeat(np.eye(2)[None], B, 0),
+                             nis_patience=2, max_covariance_trace=50.0)    # a P per system
     a.step(np.zeros((B, 1)))
     b = copy.deepcopy(a)
     rng = np.random.default_rng(3)
