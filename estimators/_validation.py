@@ -23,6 +23,8 @@ SYMMETRY_RTOL = 1e-9
 
 #: dtype kinds read as real numbers: floats, signed and unsigned integers
 REAL_KINDS = "fiu"
+#: scalar types numpy counts as numbers that are not real numbers here
+_NOT_REAL = (bool, np.bool_, np.datetime64, np.timedelta64)
 
 
 def real_array(name: str, value: ArrayLike) -> FloatArray:
@@ -42,15 +44,24 @@ def real_array(name: str, value: ArrayLike) -> FloatArray:
         raise ValueError(f"{name} must be an array of real numbers; got a ragged or "
                          f"malformed {type(value).__name__}") from None
     kind = arr.dtype.kind
-    if kind == "O" and all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+    if kind == "O" and all(isinstance(v, numbers.Real) and not isinstance(v, _NOT_REAL)
                            for v in arr.flat):
         kind = "f"                              # e.g. Fractions or Decimals mixed with floats
+    elif kind in REAL_KINDS and _holds_bool(value):
+        kind = "b"                              # numpy reads [True, 0.5] as [1.0, 0.5]
     if kind not in REAL_KINDS:
         what = {"b": "booleans", "c": "complex numbers", "M": "dates (datetime64)",
                 "m": "time spans (timedelta64)", "U": "strings", "S": "bytes"}.get(
                     kind, f"{type(value).__name__} of dtype {arr.dtype}")
         raise TypeError(f"{name} must be real numbers (floats or integers); got {what}")
     return arr.astype(np.float64, copy=False)
+
+
+def _holds_bool(value: Any) -> bool:
+    """Whether a (nested) list or tuple holds a boolean anywhere."""
+    if isinstance(value, (list, tuple)):
+        return any(isinstance(v, (bool, np.bool_)) or _holds_bool(v) for v in value)
+    return False
 
 
 def as_matrix(name: str, value: ArrayLike, shape: tuple[int | None, int | None]) -> FloatArray:
