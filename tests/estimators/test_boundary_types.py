@@ -40,9 +40,9 @@ def test_y_and_u_must_be_real_numbers(name, what):
     flt.step([0.1])
     before = copy.deepcopy(flt)
     bad = NOT_REAL[what]
-    with pytest.raises(TypeError, match="^y must be real numbers"):
+    with pytest.raises(TypeError, match=r"^y must be real numbers"):
         flt.step(bad, [0.0])
-    with pytest.raises(TypeError, match="^u must be real numbers"):
+    with pytest.raises(TypeError, match=r"^u must be real numbers"):
         flt.step([0.2], bad)
     assert flt.time_step == before.time_step
     np.testing.assert_array_equal(flt.x, before.x)
@@ -53,10 +53,10 @@ def test_y_and_u_must_be_real_numbers(name, what):
 def test_the_prior_must_be_real_numbers(what):
     bad = NOT_REAL[what]
     for name, value in (("x0", [bad[0], 0.0]), ("P0", [[bad[0], 0.0], [0.0, 1.0]])):
-        with pytest.raises(TypeError, match=f"^{name} must be real numbers"):
+        with pytest.raises(TypeError, match=rf"^{name} must be real numbers"):
             KalmanFilter(LINEAR, **{name: value})
         flt = KalmanFilter(LINEAR)
-        with pytest.raises(TypeError, match=f"^{name} must be real numbers"):
+        with pytest.raises(TypeError, match=rf"^{name} must be real numbers"):
             flt.reset(**{name: value})
 
 
@@ -72,5 +72,5 @@ def test_integers_and_other_float_widths_are_read_as_floats():
 
 def test_ragged_input_is_a_value_error_naming_the_argument():
     flt = KalmanFilter(LINEAR)
-    with pytest.raises(ValueError, match="^y must be an array of real numbers"):
+    with pytest.raises(ValueError, match=r"^y must be an array of real numbers"):
         flt.step([[0.1], [0.2, 0.3]])
