@@ -55,17 +55,24 @@ def cho_solve(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> None:
 
 
 @jit
-def times_rows(M: np.ndarray, mb: int, mw: int, Z: np.ndarray, b: int, w: int,
-               out: np.ndarray) -> None:
-    """``out = M[mb, mw] [P | T | x̄]`` — the matrix times the first ``n`` rows of window
-    ``w`` of system ``b``."""
-    for i in range(M.shape[2]):
-        for j in range(out.shape[1]):
-            out[i, j] = 0.0
-        for k in range(M.shape[3]):
-            c = M[mb, mw, i, k]
-            for j in range(out.shape[1]):
-                out[i, j] += c * Z[b, k, w, j]
+def times_rows(M: np.ndarray, Z: np.ndarray, b: int, out: np.ndarray,
+               size: tuple[int, ...]) -> None:
+    """``out[w] = M_w [P | T | x̄]_w`` for every window ``w`` of system ``b``: the window's
+    matrix (``M (B|1, W|1, k, n)``) times the first ``n`` rows of its block of ``Z``."""
+    n = len(size)
+    m = 2 * n + 1
+    mb = b if M.shape[0] > 1 else 0
+    Zb = Z[b]
+    for w in range(out.shape[0]):
+        Mw = M[mb, w if M.shape[1] > 1 else 0]
+        Ow = out[w]
+        for i in range(Mw.shape[0]):
+            for j in range(m):
+                Ow[i, j] = 0.0
+            for k in range(n):
+                c = Mw[i, k]
+                for j in range(m):
+                    Ow[i, j] += c * Zb[k, w, j]
 
 
 @jit
@@ -75,21 +82,21 @@ def predict(Z: np.ndarray, A: np.ndarray, Bu: np.ndarray, Q: np.ndarray,
     n_b, _, W, _ = Z.shape
     n = len(size)
     m = 2 * n + 1
-    tmp = np.empty((n, m))
+    AZ = np.empty((W, n, m))
     for b in range(n_b):
         ab, qb = b if A.shape[0] > 1 else 0, b if Q.shape[0] > 1 else 0
+        times_rows(A, Z, b, AZ, size)                       # A [P | T | x̄]
         for w in range(W):
             aw = w if A.shape[1] > 1 else 0
-            times_rows(A, ab, aw, Z, b, w, tmp)             # A [P | T | x̄]
             for i in range(n):
                 for j in range(m):
-                    Z[b, i, w, j] = tmp[i, j]
+                    Z[b, i, w, j] = AZ[w, i, j]
             if has_Q:                                       # (A P) Aᵀ + G Q Gᵀ
                 for i in range(n):
                     for j in range(n):
                         c = 0.0
                         for k in range(n):
-                            c += tmp[i, k] * A[ab, aw, j, k]
+                            c += AZ[w, i, k] * A[ab, aw, j, k]
                         Z[b, i, w, j] = c + Q[qb, i, j]
             if has_Bu:
                 bw = w if Bu.shape[1] > 1 else 0
@@ -106,16 +113,17 @@ def update(Z: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray,
     n2 = 2 * n
     m = n2 + 1
     p = C.shape[-2]
-    r = np.empty((p, m))
+    CZ = np.empty((W, p, m))
     g = np.empty((p, n2))
     Sig, L = np.empty((p, p)), np.empty((p, p))
     for b in range(n_b):
         if not valid[b if valid.shape[0] > 1 else 0]:
             continue
         cb = b if C.shape[0] > 1 else 0
+        times_rows(C, Z, b, CZ, size)                       # C [P | T | x̄] of every window
         for w in range(W):
             cw, yw = w if C.shape[1] > 1 else 0, w if y.shape[1] > 1 else 0
-            times_rows(C, cb, cw, Z, b, w, r)               # r = C [P | T | x̄] − [0 | 0 | y]
+            r = CZ[w]                                       # r = C [P | T | x̄] − [0 | 0 | y]
             for q in range(p):
                 r[q, m - 1] -= y[b, yw, q]
             if p == 1:                                      # [K; W]ᵀ = Σ⁻¹ [C P | C T]
@@ -161,19 +169,19 @@ def update(Z: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray,
 
 
 @jit
-def regular_inverse(F: np.ndarray, Fi: np.ndarray, threshold: float) -> bool:
+def regular_inverse(F: np.ndarray, Fi: np.ndarray, threshold: float, d: np.ndarray,
+                    Fs: np.ndarray, L: np.ndarray) -> bool:
     """``Fi = F⁻¹`` of a symmetric PSD information matrix and whether ``F`` is regular:
     ``λ_min(Fs) > threshold`` for the unit-diagonal ``Fs = D^(-1/2) F D^(-1/2)``,
     ``D = diag F`` (:func:`~fir_gym.estimators._fir_bank.information_is_regular`).
 
     ``Fs`` is inverted by Cholesky; ``‖Fs⁻¹‖²_F < threshold⁻²`` settles regularity (it
     bounds ``1/λ_min``), the eigenvalues decide the rest; a failed factor is singular.
-    A singular ``F`` gets the identity as its "inverse" (the caller falls back)."""
+    A singular ``F`` gets the identity as its "inverse" (the caller falls back). ``d``,
+    ``Fs``, ``L`` are scratch."""
     n = F.shape[0]
-    d = np.empty(n)
     for i in range(n):
         d[i] = np.sqrt(abs(F[i, i])) if F[i, i] != 0.0 else 1.0
-    Fs, L = np.empty((n, n)), np.empty((n, n))
     for i in range(n):
         for j in range(n):
             Fs[i, j] = F[i, j] / (d[i] * d[j])
@@ -203,7 +211,7 @@ def estimate(Z: np.ndarray, ref: np.ndarray, w: int, smoother: bool, prior: np.n
     P = np.empty((n_b, n, n))
     ok = np.empty(n_b, dtype=np.bool_)
     F, V = np.empty((n, n)), np.empty((n, n))
-    TV = np.empty((n, n))
+    TV, Fs, L, d = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty(n)
     for b in range(n_b):
         Zb = Z[b]
         for i in range(n):
@@ -221,7 +229,7 @@ def estimate(Z: np.ndarray, ref: np.ndarray, w: int, smoother: bool, prior: np.n
             V[:, :] = np.linalg.solve(IPF, np.ascontiguousarray(Pi))
             ok[b] = True
         else:
-            ok[b] = regular_inverse(F, V, threshold)
+            ok[b] = regular_inverse(F, V, threshold, d, Fs, L)
         if smoother:                                    # x_ref + V b,  V
             for i in range(n):
                 c = 0.0

@@ -78,26 +78,33 @@ def _time(step: Callable[[int], Any], n: int, warmup: int) -> float:
     return per_call(counting(step), n, 3, warmup=warmup) * 1e6
 
 
-#: measurement noise of the benchmark data: consistent with both models' R = 1e-2 I, and ten
-#: times that (a mismatched model: the filter rightly flags divergence and keeps flagging)
-NOISE = {"consistent": 0.1, "mismatched": 1.0}
+#: the benchmark data, ``(noise, samples)``: zero-mean measurements whose standard deviation
+#: is consistent with both models' ``R = 1e-2 I``, or ten times that (a mismatched model:
+#: the filter rightly flags divergence — within a few hundred steps, on the 1024 distinct
+#: samples, before the timing starts — and the flag stays raised); repeated cyclically
+DATA = {"consistent": (0.1, 64), "mismatched": (1.0, 1024)}
+
+
+def measurements(model: StateSpaceModel, batch: int, data: str) -> np.ndarray:
+    """The cycle of measurements ``(samples, [batch,] n_y)`` of :data:`DATA`'s ``data``."""
+    noise, samples = DATA[data]
+    shape = (batch, model.n_y) if batch > 1 else (model.n_y,)
+    return np.random.default_rng(0).normal(size=(samples, *shape)) * noise
 
 
 def ours_stepper(cls: type, model: StateSpaceModel, batch: int, skip: bool = False,
-                 noise: float = NOISE["consistent"], **opts: Any) -> Callable[[int], Any]:
+                 data: str = "consistent", **opts: Any) -> Callable[[int], Any]:
     """``step(k)``: one step of our filter on ``batch`` systems (1: one system, ``(n_y,)``),
-    on zero-mean measurements of standard deviation ``noise``; ``step.estimator`` is the
-    filter."""
-    rng = np.random.default_rng(0)
-    shape = (batch, model.n_y) if batch > 1 else (model.n_y,)
-    Y = rng.normal(size=(64, *shape)) * noise
+    on the measurements of ``data`` (:data:`DATA`); ``step.estimator`` is the filter."""
+    Y = measurements(model, batch, data)
+    shape, samples = Y.shape[1:], len(Y)
     if skip:
         opts["nan_policy"] = "skip"
     flt = cls(model, **opts)
     missing = np.full(shape, np.nan)
 
     def step(k: int) -> Any:
-        return flt.step(missing if skip and k % 1000 == 0 else Y[k % 64])
+        return flt.step(missing if skip and k % 1000 == 0 else Y[k % samples])
     step.estimator = flt                                      # type: ignore[attr-defined]
     return step
 
@@ -109,7 +116,7 @@ def _ours(cls: type, model: StateSpaceModel, batch: int, n: int, skip: bool = Fa
 
 
 def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float,
-                     noise: float = NOISE["consistent"]) -> Callable[[int], Any] | None:
+                     data: str = "consistent") -> Callable[[int], Any] | None:
     """``step(k)``: one predict + update of filterpy's filter on ``model`` (None: no filterpy),
     on the data of :func:`ours_stepper` for one system."""
     try:
@@ -127,8 +134,8 @@ def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float,
         )
     except ImportError:
         return None
-    rng = np.random.default_rng(0)
-    Y = rng.normal(size=(64, model.n_y)) * noise
+    Y = measurements(model, 1, data)
+    samples = len(Y)
     u0 = np.zeros(model.n_u)
     if kind == "kf":
         assert isinstance(model, LinearModel)
@@ -137,7 +144,7 @@ def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float,
 
         def kf_step(k: int) -> None:
             kf.predict()
-            kf.update(Y[k % 64])
+            kf.update(Y[k % samples])
         return kf_step
     if kind == "ekf":
         ekf = FpEKF(dim_x=model.n_x, dim_z=model.n_y)
@@ -148,7 +155,7 @@ def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float,
             ekf.F = model.F(x, u0)
             ekf.x = model.f(x, u0)[:, None]
             ekf.P = ekf.F @ ekf.P @ ekf.F.T + ekf.Q
-            ekf.update(Y[k % 64][:, None], lambda z: model.H(z[:, 0]),
+            ekf.update(Y[k % samples][:, None], lambda z: model.H(z[:, 0]),
                        lambda z: model.h(z[:, 0])[:, None])
         return ekf_step
     points = MerweScaledSigmaPoints(model.n_x, alpha=alpha, beta=2.0, kappa=0.0)
@@ -158,7 +165,7 @@ def filterpy_stepper(kind: str, model: StateSpaceModel, alpha: float,
 
     def ukf_step(k: int) -> None:
         ukf.predict()
-        ukf.update(Y[k % 64])
+        ukf.update(Y[k % samples])
     return ukf_step
 
 
