@@ -66,6 +66,7 @@ from .model import StateSpaceModel
 NAN_POLICIES = ("raise", "skip")
 
 _F64 = np.dtype(np.float64)
+_add = np.add.reduce
 
 
 class Estimator(ABC):
@@ -404,7 +405,7 @@ class Estimator(ABC):
         else:
             Y = self._first_measurement(y)
         # one sum tells whether every value is finite (a few values: faster on floats)
-        fine = math.isfinite(sum(Y.ravel().tolist()) if Y.size <= 16 else Y.sum())
+        fine = math.isfinite(sum(Y.ravel().tolist()) if Y.size <= 16 else _add(Y, None))
         if fine:
             return Y, self._all_valid
         valid = np.all(np.isfinite(Y), axis=1)
@@ -442,7 +443,7 @@ class Estimator(ABC):
             U = u.reshape(1, n_u) if n_b == 1 else np.broadcast_to(u.reshape(1, n_u), U.shape)
         else:
             raise ValueError(f"u must have shape ({n_u},) or ({n_b}, {n_u}); got {u.shape}")
-        if n_u and not math.isfinite(U.sum()):
+        if n_u and not math.isfinite(_add(U, None)):
             raise ValueError("u must be finite")
         return U
 
