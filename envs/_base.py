@@ -5,8 +5,9 @@ measurement function, its reward, its physical domain and a drawing. The base
 class does what must be identical everywhere:
 
 * **Actions.** The action space is ``Box(-1, 1, (n_u,), float32)``; the plant
-  scales it to physical units. A NaN/inf or wrongly shaped action raises
-  ``ValueError`` naming the action. An out-of-bounds action is *clipped* to
+  scales it to physical units. A NaN/inf, wrongly shaped or non-numeric action
+  (a string, a boolean, a complex number, a date: :mod:`fir_gym.envs._inputs`)
+  raises ``ValueError`` naming the action. An out-of-bounds action is *clipped* to
   ``[-1, 1]`` (what stable-baselines3 does before calling ``step``);
   ``info["action"]`` is the action applied (float64, after clipping) and
   ``info["action_clipped"]`` says whether it was clipped. A size-1 action may be
@@ -25,13 +26,37 @@ class does what must be identical everywhere:
   they are "probably too low/high" — the warning is expected.
   ``info["state"]`` is a fresh copy of the true state ``x[k]``.
 * **Reset options.** ``reset(options={"state": x0})`` starts from a given state.
+* **Frames.** ``render()`` (``render_mode="rgb_array"``) draws the true state and
+  remembers the frame's view, so that :meth:`~fir_gym.envs._overlay.EstimateDrawing.draw_estimate`
+  can draw an estimate, its 2σ region and the measurement over it in the plant's own
+  coordinates (:mod:`fir_gym.envs._overlay`; each plant's ``_picture`` says where a
+  state puts its drawing).
+  ``options`` must be ``None`` or a dict (``TypeError`` otherwise) with known keys;
+  ``x0`` must be real numbers of shape ``(n_x,)``, finite, within ``±state_limit``
+  and inside the plant's domain (the states its episodes run in: see "Episode End"
+  in each plant's docstring) — a state where the episode would end at once is
+  refused with a ``ValueError`` naming ``options['state']``, not accepted and
+  terminated at the first step.
+* **Nothing non-finite leaves a plant.** A step whose simulation fails — the new
+  state is NaN or inf (``"nonfinite_state"``) or has a component beyond the plant's
+  ``±state_limit`` (``"state_overflow"``; :data:`STATE_LIMIT` = 1e150, MuJoCo's 1e10
+  for the MuJoCo plant), its measurement or reward is not finite
+  (``"nonfinite_observation"``, ``"nonfinite_reward"``), or MuJoCo reset its
+  simulation (``"mjWARN_BADQPOS"``, ``"mjWARN_BADQVEL"``, ``"mjWARN_BADQACC"``) —
+  ends the episode (``terminated=True``) with ``info["simulation_failure"]`` naming
+  the cause (:data:`SIMULATION_FAILURES`). The
+  plant then stays at the last valid state (``info["state"]`` and :attr:`state`),
+  the observation repeats the last one, the reward is that of staying at the last
+  valid state under the action, and per-step extras that are not finite are left
+  out of ``info``. ``render()`` of a state that is not valid (set by hand) draws the
+  finite parts of the scene inside a red frame.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar, SupportsFloat
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -41,13 +66,36 @@ from numpy.typing import ArrayLike, NDArray
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import as_covariance, as_vector
 
+from ._inputs import real_array, reset_options
+from ._overlay import EstimateDrawing
+
 FloatArray = NDArray[np.float64]
 
+#: The default largest magnitude of a state component: beyond it a simulation has
+#: overflowed. Below it squares of the state stay finite (1e300), and so do every
+#: plant's measurement and (quadratic) reward.
+STATE_LIMIT = 1e150
 
-class PlantEnv(gym.Env[FloatArray, FloatArray]):
+#: what ``info["simulation_failure"]`` may say (the step ends the episode)
+SIMULATION_FAILURES: dict[str, str] = {
+    "nonfinite_state": "the transition produced NaN or inf",
+    "state_overflow": "a state component beyond the plant's ±state_limit",
+    "nonfinite_observation": "the measurement of the new state is not finite",
+    "nonfinite_reward": "the reward of the transition is not finite",
+    "mjWARN_BADQPOS": "MuJoCo found a NaN or huge position and reset its simulation",
+    "mjWARN_BADQVEL": "MuJoCo found a NaN or huge velocity and reset its simulation",
+    "mjWARN_BADQACC": "MuJoCo found a NaN or huge acceleration and reset its simulation",
+}
+
+#: the keys ``reset(options=...)`` understands
+RESET_OPTIONS = ("state",)
+
+
+class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
     """Base class of the paper plants; see the module docstring for the shared rules."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
+    # (gymnasium declares ``metadata`` an instance attribute: not a ClassVar, hence RUF012)
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}  # noqa: RUF012
 
     #: names of the state components, in order (set by each plant)
     state_names: ClassVar[tuple[str, ...]] = ()
@@ -57,6 +105,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     action_names: ClassVar[tuple[str, ...]] = ()
     #: the FIR window (measurements) a wrapper uses when the user gives none
     default_horizon: ClassVar[int] = 10
+    #: beyond this magnitude a state component means the simulation failed
+    state_limit: ClassVar[float] = STATE_LIMIT
 
     def __init__(
         self,
@@ -144,6 +194,9 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
         shape = (self._initial_sqrt.shape[1],) if n is None else (n, self._initial_sqrt.shape[1])
         return self.initial_state + rng.standard_normal(shape) @ self._initial_sqrt.T
 
+    def _restore(self, x: FloatArray) -> None:
+        """Put a simulator back at the valid state ``x`` after a failed step (MuJoCo's)."""
+
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         raise NotImplementedError
 
@@ -173,45 +226,65 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[FloatArray, dict[str, Any]]:
+        given = reset_options(options, RESET_OPTIONS)
+        state = self._check_state("options['state']", given["state"]) \
+            if "state" in given else None
         super().reset(seed=seed)
-        options = options or {}
-        unknown = sorted(set(options) - {"state"})
-        if unknown:
-            raise ValueError(f"reset options {unknown} are not understood; known: ['state']")
-        if "state" in options:
-            self.state = as_vector("options['state']", options["state"], len(self.state_names))
-        else:
-            self.state = self._sample_initial_state(self.np_random)
+        self.state = self._sample_initial_state(self.np_random) if state is None else state
         self.time_step = 0
-        self._last_extra: dict[str, Any] = {}
+        self._last_extra = {}
         self._last_obs = self._measure(self.state, None, self.np_random)
         return self._last_obs.copy(), {"state": self.state.copy()}
 
     def step(
         self, action: ArrayLike
-    ) -> tuple[FloatArray, SupportsFloat, bool, bool, dict[str, Any]]:
+    ) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
         a, clipped = self._check_action(action)
         x = self.state
         x_next, extra = self._transition(x, a, self.time_step, self.np_random)
         self.time_step += 1
-        terminated = not bool(self._in_domain(x_next))
-        reward = float(self._reward(x, a, x_next))
+        failure = extra.get("simulation_failure") or state_failure(x_next, self.state_limit)
+        if failure is None:
+            terminated = not bool(self._in_domain(x_next))
+            reward = float(self._reward(x, a, x_next))
+            obs = self._measure(x_next, extra, self.np_random)
+            # a finite sum means every entry is finite (the exact test only when it is not)
+            if not math.isfinite(reward + sum(obs.tolist())):
+                failure = ("nonfinite_reward" if not math.isfinite(reward) else
+                           None if np.isfinite(obs).all() else "nonfinite_observation")
+        if failure is not None:
+            return self._failed_step(x, a, clipped, extra, failure)
         self.state = x_next
         self._last_extra = extra
+        self._last_obs = obs
         # ``a`` is a fresh array made by _check_action: no copy needed for info
         info: dict[str, Any] = {"state": x_next.copy(), "action": a,
                                 "action_clipped": clipped, **extra}
-        # a finite sum means every entry is finite (the exact test only when it is not)
-        if math.isfinite(sum(x_next.tolist())) or np.isfinite(x_next).all():
-            obs = self._measure(x_next, extra, self.np_random)
-        else:
-            # A plant whose domain check is right never gets here; if parameters push
-            # the state to overflow in one step, end the episode without handing NaN
-            # to the controller: repeat the last observation and say why.
-            obs, reward = self._last_obs.copy(), 0.0
-            info["nonfinite_state"] = True
-        self._last_obs = obs
         return obs, reward, terminated, False, info
+
+    def _failed_step(self, x: FloatArray, a: FloatArray, clipped: bool,
+                     extra: dict[str, Any], failure: str
+                     ) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
+        """End the episode at the last valid state ``x``: the transition failed.
+
+        The plant stays at ``x``, the observation repeats the last one and the reward
+        is that of staying at ``x`` (a terminal step like any other termination).
+        """
+        self._restore(x)
+        reward = float(self._reward_of_staying(x, a))
+        info: dict[str, Any] = {"state": x.copy(), "action": a, "action_clipped": clipped}
+        info.update((key, value) for key, value in extra.items() if _all_finite(value))
+        info["simulation_failure"] = failure
+        return self._last_obs.copy(), reward, True, False, info
+
+    def _reward_of_staying(self, x: FloatArray, a: FloatArray) -> Any:
+        """The reward of a failed step: staying at the last valid state ``x`` under ``a``
+        (one system or a batch). A plant whose reward is not finite there is broken."""
+        reward = self._reward(x, a, x)
+        if not np.all(np.isfinite(reward)):
+            raise RuntimeError(f"{type(self).__name__}'s reward is not finite at the valid "
+                               f"state(s) {x}")
+        return reward
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:
@@ -220,15 +293,36 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
                 f"gym.make('{self.spec.id if self.spec else type(self).__name__}')."
             )
             return None
-        from ._draw import Canvas
+        from ._draw import ACCENT, Canvas
 
         canvas = Canvas(400, 300)
-        self._draw(canvas)
+        with np.errstate(all="ignore"):            # a broken state's shapes are skipped
+            self._draw(canvas)
+        if state_failure(np.asarray(self.state, dtype=np.float64),
+                         self.state_limit) is not None:
+            canvas.frame(ACCENT)                    # a broken state: say so in the picture
+        self._frame_view = self._plane_view(canvas)
         return canvas.image
 
     # ------------------------------------------------------------------ helpers
+    def _check_state(self, name: str, value: Any) -> FloatArray:
+        """``value`` as a state of this plant: ``n_x`` real numbers, valid, in the domain."""
+        names = self.state_names
+        x = real_array(name, value, f"{len(names)} real numbers (the state {list(names)})")
+        x = x.copy() if x is value else x                 # the plant keeps it
+        if x.shape != (len(names),):
+            raise ValueError(f"{name} must have shape ({len(names)},) (the state "
+                             f"{list(names)}); got shape {x.shape}")
+        if state_failure(x, self.state_limit) is not None:
+            raise ValueError(f"{name} must be finite and within ±{self.state_limit:g}; got {x}")
+        if not bool(self._in_domain(x)):
+            raise ValueError(f"{name} = {x} is outside the domain of {type(self).__name__}, "
+                             "where its episodes run (see 'Episode End' in its docstring): "
+                             "the episode would end at once")
+        return x
+
     def _check_action(self, action: ArrayLike) -> tuple[FloatArray, bool]:
-        shape = self.action_space.shape
+        shape = self.action_space.shape or ()
         if shape == (1,) and type(action) is np.ndarray and action.shape == shape \
                 and action.dtype.kind == "f":
             # the common case, in floats: same checks, same result as below
@@ -237,10 +331,8 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
                 raise ValueError(f"action must be finite; got {action.astype(np.float64)}")
             c = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
             return np.array((c,)), c != v
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be numeric of shape {shape}; got {action!r}") from None
+        a = real_array("action", action,
+                       lambda: f"{shape[0]} real number(s) in [-1, 1] (shape {shape})")
         if a.shape != shape:
             if a.size == 1 and shape == (1,) and a.ndim <= 1:
                 a = a.reshape(1)
@@ -250,6 +342,29 @@ class PlantEnv(gym.Env[FloatArray, FloatArray]):
             raise ValueError(f"action must be finite; got {a}")
         clipped = a.clip(-1.0, 1.0)
         return clipped, bool((clipped != a).any())
+
+
+def state_failure(x: FloatArray, limit: float) -> str | None:
+    """Why the single state ``x`` is not a valid one (see :data:`SIMULATION_FAILURES`),
+    or ``None``: valid states are finite and within ``±limit``."""
+    xs = x.tolist()
+    # NaN fails the sum; the bounds hold for every entry when they hold for min and max
+    if -limit <= min(xs) and max(xs) <= limit and math.isfinite(sum(xs)):
+        return None
+    return "nonfinite_state" if not np.isfinite(x).all() else "state_overflow"
+
+
+def valid_states(X: FloatArray, limit: float) -> NDArray[np.bool_]:
+    """Per row of a batch ``(B, n_x)``: whether the state is valid (:func:`state_failure`)."""
+    return np.all(np.abs(X) <= limit, axis=-1)            # NaN compares False
+
+
+def _all_finite(value: Any) -> bool:
+    """Whether a per-step extra holds only finite numbers (non-numeric extras pass)."""
+    try:
+        return bool(np.all(np.isfinite(value)))
+    except TypeError:
+        return True
 
 
 def _diagonal_of(M: FloatArray) -> FloatArray | None:

@@ -3,16 +3,23 @@
 Pure numpy, no display and no extra dependency: filled circles, thick line
 segments, rectangles and polylines, anti-aliasing-free. World coordinates are
 mapped to pixels by :meth:`Canvas.set_view` (y up).
+
+Any coordinate may be NaN, infinite or huge (a plant drawn at a broken state): a
+shape whose pixel box is not finite is not drawn, one that reaches off the canvas is
+cut at its edge, so drawing never fails on the numbers it is given.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 Color = tuple[int, int, int]
+#: world coordinates of several points along one axis
+Points = Sequence[float] | NDArray[np.floating[Any]]
 
 BACKGROUND: Color = (250, 250, 247)
 INK: Color = (40, 40, 48)
@@ -20,6 +27,10 @@ ACCENT: Color = (210, 85, 45)
 BLUE: Color = (45, 105, 190)
 GREEN: Color = (60, 150, 80)
 GREY: Color = (170, 170, 175)
+#: the estimate drawn over a plant's frame (a colour no plant uses)
+ESTIMATE: Color = (175, 40, 170)
+#: the measurement drawn over a plant's frame
+MEASUREMENT: Color = (0, 140, 130)
 
 
 class Canvas:
@@ -90,8 +101,7 @@ class Canvas:
         ey = py - (p0[1] + t * d[1])
         self.image[r0:r1, c0:c1][ex * ex + ey * ey <= h * h] = color
 
-    def polyline(self, xs: Sequence[float], ys: Sequence[float], color: Color,
-                 width: float = 1.5) -> None:
+    def polyline(self, xs: Points, ys: Points, color: Color, width: float = 1.5) -> None:
         for i in range(len(xs) - 1):
             self.line(xs[i], ys[i], xs[i + 1], ys[i + 1], color, width)
 
@@ -103,7 +113,13 @@ class Canvas:
         if c0 < c1 and r0 < r1:
             self.image[r0:r1, c0:c1] = color
 
-    def polygon(self, xs: Sequence[float], ys: Sequence[float], color: Color) -> None:
+    def frame(self, color: Color, width: int = 6) -> None:
+        """A border of ``width`` pixels around the whole canvas."""
+        image = self.image
+        image[:width], image[-width:] = color, color
+        image[:, :width], image[:, -width:] = color, color
+
+    def polygon(self, xs: Points, ys: Points, color: Color) -> None:
         """A filled simple polygon (even-odd rule)."""
         pts = np.array([self.to_pixels(x, y) for x, y in zip(xs, ys, strict=True)])
         c0, c1 = _span(pts[:, 0].min(), pts[:, 0].max(), self.width)
@@ -122,5 +138,48 @@ class Canvas:
         self.image[r0:r1, c0:c1][inside] = color
 
 
+    # ---------------------------------------------------------------- frames and text
+    @classmethod
+    def over(cls, image: NDArray[np.uint8]) -> Canvas:
+        """A canvas that draws onto ``image`` (``(height, width, 3)`` uint8, changed in place).
+
+        Its view is the default one: world ``(x, y)`` is pixel column ``x``, and row
+        ``height - y`` (y up from the bottom edge).
+        """
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"image must be an (height, width, 3) uint8 array; got "
+                             f"{image.dtype} of shape {image.shape}")
+        canvas = cls(image.shape[1], image.shape[0])
+        canvas.image = image
+        return canvas
+
+    @property
+    def view(self) -> tuple[float, tuple[float, float]]:
+        """The world-to-pixel map as ``(scale, (column offset, row offset))``:
+        pixel ``(offset[0] + x scale, offset[1] - y scale)`` (see :meth:`to_pixels`)."""
+        return self._scale, self._offset
+
+    def text(self, column: float, row: float, text: str, color: Color, scale: int = 1) -> None:
+        """One line of ``text`` in the 5 × 9 bitmap font (:mod:`fir_gym.envs._font`), its
+        top-left corner at pixel ``(column, row)``; ``scale`` pixels per font pixel."""
+        from ._font import text_mask
+
+        mask = text_mask(text)
+        if scale != 1:
+            mask = mask.repeat(scale, axis=0).repeat(scale, axis=1)
+        c, r = round(column), round(row)
+        c0, r0 = max(c, 0), max(r, 0)
+        c1, r1 = min(c + mask.shape[1], self.width), min(r + mask.shape[0], self.height)
+        if c0 < c1 and r0 < r1:
+            self.image[r0:r1, c0:c1][mask[r0 - r:r1 - r, c0 - c:c1 - c]] = color
+
+
 def _span(lo: float, hi: float, limit: int) -> tuple[int, int]:
+    """The pixel range ``[lo, hi]`` covers on an axis of ``limit`` pixels, cut to the
+    canvas; empty when either end is NaN (``inf`` ends are cut like any other)."""
+    if not (lo <= hi):                         # NaN (or an empty range): nothing to draw
+        return 0, 0
+    lo, hi = max(lo, -1.0), min(hi, limit + 1.0)
+    if lo > hi:                                # entirely off the canvas
+        return 0, 0
     return max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, limit)

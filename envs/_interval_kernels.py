@@ -6,6 +6,10 @@ substep on a batch, or ~40 µs of Python floats for one system. Each loop here r
 substeps outside and systems inside, so the inner loop has no dependency chain and
 vectorises, and does the Python path's operations in the same order: the two give
 the same bits (``tests/envs/test_fast_paths.py``).
+
+Without numba each name holds the uncompiled loop (:func:`fir_gym.estimators.compiled.jit`),
+so calls type-check; callers dispatch on ``compiled.ENABLED``, which is False then, and
+take their numpy path.
 """
 
 from __future__ import annotations
@@ -188,7 +192,7 @@ def _slider_rk4(x: np.ndarray, U: np.ndarray, theta: np.ndarray, c_: np.ndarray,
                 coef = coefs[st]
                 for i in range(4):
                     zi[i] = z[i] if coef == 0.0 else z[i] + (coef * h) * K[st - 1, i]
-                _slider_derivatives_compiled(zi, Ub, mu, M0, c_, friction, jacobian, K[st], J)
+                _slider_derivativesjit(zi, Ub, mu, M0, c_, friction, jacobian, K[st], J)
                 if jacobian:        # ∂k_i/∂z0 = A_i (I + c h ∂k_{i-1}/∂z0), ∂k_i/∂p likewise
                     for i in range(4):
                         for j in range(4):

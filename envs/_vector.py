@@ -14,18 +14,35 @@ actions after clipping) and each plant's per-step extras, each with Gymnasium's
 ``_key`` mask. The plant's noise is drawn from the vector env's own generator, so a
 seed gives bit-identical rollouts (but not the same numbers as ``num_envs``
 separate envs, whose generators differ).
+
+With ``render_mode="rgb_array"`` (``gym.make_vec(id, n, vectorization_mode=
+"vector_entry_point", render_mode="rgb_array")``), ``render()`` returns one frame per
+sub-environment, a tuple as Gymnasium's ``SyncVectorEnv`` does, and
+:attr:`PlantVectorEnv.frame_views` the view of each (for drawing estimates over them).
+
+The single plant's rules hold per sub-environment (:mod:`fir_gym.envs._base`):
+actions must be real numbers (:mod:`fir_gym.envs._inputs`); ``reset(options={"state":
+x0})`` takes one valid state ``(n_x,)`` for every sub-env or one per sub-env
+``(B, n_x)``; a sub-env whose simulation fails terminates at its last valid state,
+with its last observation and the reward of staying there, and
+``info["simulation_failure"]`` (an object array, ``None`` elsewhere, with its
+``_simulation_failure`` mask) says why; non-finite per-step extras of that sub-env
+are masked out (0, with their ``_key`` mask off).
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+import math
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
-from ._base import PlantEnv
+from ._base import RESET_OPTIONS, PlantEnv, state_failure, valid_states
+from ._inputs import real_array, reset_options
 
 FloatArray = NDArray[np.float64]
 
@@ -33,8 +50,8 @@ FloatArray = NDArray[np.float64]
 class PlantVectorEnv(VectorEnv):
     """``num_envs`` copies of ``plant_class(**kwargs)`` stepped as one batch."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": [],
-                                          "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata = {"render_modes": ["rgb_array"],  # noqa: RUF012
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(
         self,
@@ -50,13 +67,17 @@ class PlantVectorEnv(VectorEnv):
         if max_episode_steps is not None and max_episode_steps <= 0:
             raise ValueError(
                 f"max_episode_steps must be positive or None; got {max_episode_steps!r}")
-        if render_mode is not None:
-            raise ValueError("the native vector envs do not render; use "
-                             "gym.make_vec(..., vectorization_mode='sync') for frames")
-        self.plant = plant_class(**plant_kwargs)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array' for a native vector env; "
+                             f"got {render_mode!r}")
+        self.plant = plant_class(render_mode=render_mode, **plant_kwargs)
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
-        self.render_mode = None
+        self.render_mode = render_mode
+        # the plant's frame rate (instance metadata, as Gymnasium's wrappers set theirs)
+        self.metadata = {**type(self).metadata,  # type: ignore[misc]
+                         "render_fps": self.plant.metadata.get("render_fps", 30)}
+        self._frame_views: tuple[Any, ...] = ()
         self.single_action_space = self.plant.action_space
         self.single_observation_space = self.plant.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -66,6 +87,7 @@ class PlantVectorEnv(VectorEnv):
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=bool)
         self._n_x = n_x
+        self._everyone = np.ones(self.num_envs, dtype=bool)      # read-only: never returned
 
     @property
     def model(self) -> Any:
@@ -74,60 +96,149 @@ class PlantVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[FloatArray, dict[str, Any]]:
+        given = reset_options(options, RESET_OPTIONS)
+        states = self._check_states(given["state"]) if "state" in given else None
         super().reset(seed=seed)
-        if options:
-            raise ValueError(f"reset options {sorted(options)} are not supported by the "
-                             "native vector env")
-        self.states = self.plant._sample_initial_state(self.np_random, self.num_envs)
+        self.states = self.plant._sample_initial_state(self.np_random, self.num_envs) \
+            if states is None else states
         self.steps[:] = 0
         self.prev_done[:] = False
         obs = self.plant._measure(self.states, None, self.np_random)
+        self._last_obs = obs.copy()
         return obs, self._info({"state": self.states.copy()})
 
     def step(self, actions: ArrayLike
              ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, dict[str, Any]]:
         A = self._check_actions(actions)
         x = self.states
-        x_next, extra = self.plant._transition(x, A, self.steps, self.np_random)
-        reward = np.broadcast_to(np.asarray(self.plant._reward(x, A, x_next), dtype=np.float64),
+        plant = self.plant
+        x_next, extra = plant._transition(x, A, self.steps, self.np_random)
+        limit = plant.state_limit
+        # one reduction each way in the common case (NaN fails the comparisons)
+        all_valid = bool(x_next.max() <= limit and x_next.min() >= -limit)
+        valid = self._everyone if all_valid else valid_states(x_next, limit)
+        # a failed sub-env stays at its state: never measure or reward an invalid one
+        safe = x_next if all_valid else np.where(valid[:, None], x_next, x)
+        reward = np.broadcast_to(np.asarray(plant._reward(x, A, safe), dtype=np.float64),
                                  (self.num_envs,)).copy()
-        terminated = ~np.asarray(self.plant._in_domain(x_next), dtype=bool)
+        terminated = ~np.asarray(plant._in_domain(x_next), dtype=bool)
         self.steps += 1
         truncated = (self.steps >= self.max_episode_steps if self.max_episode_steps
                      else np.zeros(self.num_envs, dtype=bool))
-        finite = np.all(np.isfinite(x_next), axis=1)
-        safe = np.where(finite[:, None], x_next, x)            # never measure a non-finite state
-        obs = self.plant._measure(safe, extra, self.np_random)
-
+        obs = plant._measure(safe, extra, self.np_random)
         done = self.prev_done
+        failure = None if all_valid and math.isfinite(reward.sum() + obs.sum()) else \
+            self._failures(x_next, valid, reward, obs, done)
+        masks: dict[str, np.ndarray] = {}
+        if failure is not None:                                # end them at their last state
+            failed = failure != None                           # noqa: E711 (object array)
+            x_next = np.array(x_next)
+            x_next[failed] = x[failed]
+            obs[failed] = self._last_obs[failed]
+            reward[failed] = plant._reward_of_staying(x[failed], A[failed])
+            terminated |= failed
+            extra = dict(extra)
+            for key, value in extra.items():
+                arr = np.array(np.broadcast_to(np.asarray(value), (self.num_envs,)))
+                if arr.dtype.kind in "fc":
+                    masks[key] = np.isfinite(arr)
+                    arr[~masks[key]] = 0.0
+                extra[key] = arr
         if np.any(done):                                        # next-step autoreset
-            fresh = self.plant._sample_initial_state(self.np_random, int(done.sum()))
+            fresh = plant._sample_initial_state(self.np_random, int(done.sum()))
             x_next[done] = fresh
-            obs[done] = self.plant._measure(fresh, None, self.np_random)
+            obs[done] = plant._measure(fresh, None, self.np_random)
             self.steps[done] = 0
             reward[done] = 0.0
             terminated[done] = False
             truncated[done] = False
         self.states = x_next
         self.prev_done = terminated | truncated
+        self._last_obs = obs.copy()
         info = {"state": x_next.copy(), "action": A}
         info.update({key: np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
                      for key, v in extra.items()})
-        return obs, reward, terminated, truncated, self._info(info)
+        if failure is not None:
+            info["simulation_failure"] = failure
+            masks["simulation_failure"] = failure != None     # noqa: E711
+        return obs, reward, terminated, truncated, self._info(info, masks)
+
+    def _failures(self, x_next: FloatArray, valid: np.ndarray, reward: FloatArray,
+                  obs: FloatArray, done: np.ndarray) -> np.ndarray | None:
+        """Per sub-env, why its step failed (an object array, ``None`` where it did not),
+        or ``None`` when no step failed; sub-envs being autoreset do not count."""
+        reward_ok, obs_ok = np.isfinite(reward), np.all(np.isfinite(obs), axis=1)
+        ok = valid & reward_ok & obs_ok | done
+        if ok.all():
+            return None
+        failure = np.full(self.num_envs, None, dtype=object)
+        for i in np.flatnonzero(~ok):
+            failure[i] = (state_failure(x_next[i], self.plant.state_limit) if not valid[i] else
+                          "nonfinite_reward" if not reward_ok[i] else "nonfinite_observation")
+        return failure
+
+    def render(self) -> tuple[NDArray[np.uint8], ...] | None:
+        """One ``rgb_array`` frame per sub-environment (the plant's drawing of its state)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass "
+                            "render_mode='rgb_array' to gym.make_vec")
+            return None
+        plant = self.plant
+        kept = plant.state, plant.time_step, plant._last_extra
+        frames: list[NDArray[np.uint8]] = []
+        views = []
+        try:
+            for i in range(self.num_envs):
+                plant.state, plant.time_step, plant._last_extra = self.states[i], \
+                    int(self.steps[i]), {}
+                frame = plant.render()
+                assert frame is not None                # the plant has render_mode rgb_array
+                frames.append(frame)
+                views.append(plant.frame_view)
+        finally:
+            plant.state, plant.time_step, plant._last_extra = kept
+        self._frame_views = tuple(views)
+        return tuple(frames)
+
+    @property
+    def frame_views(self) -> tuple[Any, ...]:
+        """The view of each frame the last :meth:`render` returned (see
+        :class:`fir_gym.envs._overlay.FrameView`)."""
+        return self._frame_views
 
     def _check_actions(self, actions: ArrayLike) -> FloatArray:
         shape = self.action_space.shape
-        A = np.asarray(actions, dtype=np.float64)
+        A = actions if type(actions) is np.ndarray and actions.dtype.kind == "f" else \
+            real_array("actions", actions, lambda: f"real numbers in [-1, 1] of shape {shape}")
         if A.shape != shape:
             raise ValueError(f"actions must have shape {shape}; got shape {A.shape}")
         if not np.all(np.isfinite(A)):
             raise ValueError("actions must be finite")
-        return np.clip(A, -1.0, 1.0)
+        return np.clip(A, -1.0, 1.0).astype(np.float64, copy=False)
 
-    def _info(self, info: dict[str, Any]) -> dict[str, Any]:
-        mask = np.ones(self.num_envs, dtype=bool)
+    def _check_states(self, value: Any) -> FloatArray:
+        """``reset``'s ``options['state']``: one state for all sub-envs, or one each."""
+        n, names = self.num_envs, self.plant.state_names
+        X = real_array("options['state']", value,
+                       f"real numbers of shape ({len(names)},) or ({n}, {len(names)})")
+        if X is value:                                     # the vector env keeps it
+            X = X.copy()
+        if X.shape == (len(names),):
+            X = np.tile(X, (n, 1))
+        elif X.shape != (n, len(names)):
+            raise ValueError(f"options['state'] must have shape ({len(names)},) (one state "
+                             f"{list(names)} for every sub-env) or ({n}, {len(names)}); got "
+                             f"shape {X.shape}")
+        for i, row in enumerate(X):
+            self.plant._check_state(f"options['state'][{i}]", row)
+        return X
+
+    def _info(self, info: dict[str, Any], masks: dict[str, np.ndarray] | None = None
+              ) -> dict[str, Any]:
+        everyone = np.ones(self.num_envs, dtype=bool)
+        masks = masks or {}
         out: dict[str, Any] = {}
         for key, value in info.items():
             out[key] = value
-            out["_" + key] = mask
+            out["_" + key] = masks.get(key, everyone)
         return out

@@ -126,7 +126,10 @@ class CarrierMotionEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("compensator_offset",)
     #: default FIR window (5 s: a long window against the heavy measurement noise)
     default_horizon: ClassVar[int] = 50
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    #: the legend's name and mark for what the drawing shows of the true state
+    truth_label: ClassVar[str] = "truth (deck)"
+    truth_color: ClassVar[tuple[int, int, int]] = _draw.GREY
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
 
     def __init__(
         self,
@@ -220,6 +223,15 @@ class CarrierMotionEnv(PlantEnv):
         offset = float(self._last_extra.get("compensator_offset", 0.0))
         c = float(np.clip(offset, -1.4 * s, 1.4 * s))
         canvas.line(1.6 * s, c, 1.9 * s, c, _draw.ACCENT, width=4.0)          # compensator
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The middle of the deck at heave ``x1`` (the grey strip :meth:`_draw` draws)."""
+        return np.array([[0.0, float(x[0]) + 0.09 * self._sigma1]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The deck position the measurement reads (through the true sensor gain)."""
+        deck = float(y[0]) / float(self._C[0, 0])
+        return [(np.array([0.0, deck + 0.09 * self._sigma1]), None)]
 
 
 def _non_negative(name: str, value: Any) -> float:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -58,6 +58,9 @@ class OrbitDynamics(FirstStateMeasured):
             rows = [self.propagate(x[i], U[i], jacobian) for i in range(x.shape[0])]
             return (np.array([r[0] for r in rows]),
                     np.array([r[1] for r in rows]) if jacobian else None)
+        r: Any                                     # floats (one system) or arrays (a batch)
+        v: Any
+        a: Any
         if single:
             r, v = float(x.flat[0]), float(x.flat[1])
             a = float(np.asarray(u).flat[0]) * self.thrust_max
@@ -85,12 +88,12 @@ class OrbitDynamics(FirstStateMeasured):
         return self.propagate(x, u)[0]
 
     def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
-        return self.propagate(x, u, jacobian=True)[1]
+        return cast(FloatArray, self.propagate(x, u, jacobian=True)[1])   # not None: jacobian
 
     def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``f`` and ``F`` in one pass of the Euler loop."""
         x_next, J = self.propagate(x, u, jacobian=True)
-        return x_next, J
+        return x_next, cast(FloatArray, J)
 
 
 class OrbitEnv(PlantEnv):
@@ -165,7 +168,7 @@ class OrbitEnv(PlantEnv):
     state_names: ClassVar[tuple[str, ...]] = ("r", "v")
     measurement_names: ClassVar[tuple[str, ...]] = ("r_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("thrust",)
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
 
     def __init__(
         self,
@@ -236,4 +239,12 @@ class OrbitEnv(PlantEnv):
         canvas.circle(0.0, 0.0, self.r_min, _draw.BLUE)
         canvas.line(0.0, 0.0, 0.0, r, _draw.GREY, width=1.0)
         canvas.circle(0.0, r, 0.02 * extent + 0.1, _draw.ACCENT)
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The body at radius ``r`` on the vertical line (what :meth:`_draw` draws)."""
+        return np.array([[0.0, float(x[0])]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured radius, on the same line."""
+        return [(np.array([0.0, float(y[0])]), None)]
 

@@ -13,8 +13,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
-from . import _mujoco_passive
 from ._base import PlantEnv, psd_sqrt
+from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
+from ._overlay import CameraView
 from .pendulum_slider_dynamics import FRICTION_MODES, PAPER_PARAMS, PendulumSliderDynamics
 
 ASSET = Path(__file__).parent / "assets" / "pendulum_slider.xml"
@@ -30,70 +31,55 @@ class PaperFrictionForce:
     Eq (15) (with the errata of docs/papers.md#003-eq-15) adds to the slider the force
     ``F = -μ [(m1 + m2) g + m2 l cosθ θ̇² + m2 l sinθ θ̈]`` (μ times the rail's normal
     force, without sign(ẋ)). It depends on θ̈, which depends on ``F``: with
-    ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` the accelerations without ``F``), ``F = c₀ + c₁ θ̈``
+    ``q̈ = q̈₀ + M⁻¹ e_x F`` (``q̈₀`` MuJoCo's accelerations without ``F``), ``F = c₀ + c₁ θ̈``
     gives ``F = (c₀ + c₁ θ̈₀) / (1 - c₁ [M⁻¹]_θx)``.
 
-    The callback runs at each of MuJoCo's four RK4 stages, so it is kept to float
-    arithmetic on two ``tolist`` reads: the 2-DOF mass matrix
-    ``M = [[m1 + m2, −m2 l cosθ], [−m2 l cosθ, I_c + m2 l²]]`` and bias forces
-    ``[m2 l sinθ θ̇², m2 g l sinθ]`` (Coriolis/centripetal and gravity) are those of this
-    MJCF model in closed form, and ``q̈₀ = M⁻¹ (qfrc_passive + qfrc_applied + gear·ctrl −
-    bias)`` takes MuJoCo's own passive (spring, hinge damping), applied and actuator
-    forces. :meth:`reference_force` computes the same force from MuJoCo's own bias
+    :attr:`law` is that force as a :data:`~fir_gym.envs._mujoco_rk4.StageLaw`: from a
+    stage's state and MuJoCo's accelerations ``q̈₀`` (spring, hinge damping, gravity,
+    Coriolis, motor and applied forces, all MuJoCo's), the accelerations with ``F``. It
+    runs at each of the four RK4 stages, so it is float arithmetic with the 2-DOF mass
+    matrix of this MJCF model in closed form, ``M = [[m1 + m2, −m2 l cosθ], [−m2 l cosθ,
+    I_c + m2 l²]]``. :meth:`reference_force` computes ``F`` from MuJoCo's own bias
     forces (``mj_rne``) and mass-matrix solve (``mj_solveM``); the tests check that
-    the two agree to round-off.
+    MuJoCo's accelerations with that force applied are the law's to round-off.
     """
 
     def __init__(self, model: mujoco.MjModel, mu: float, m1: float, m2: float, l: float,
                  g: float, I_c: float) -> None:
         self.mu, self.weight, self.m2l = mu, (m1 + m2) * g, m2 * l
-        self.mt, self.J, self.m2gl = m1 + m2, I_c + m2 * l * l, m2 * g * l
+        self.mt, self.J = m1 + m2, I_c + m2 * l * l
         self.x_dof = int(model.jnt_dofadr[model.joint("x").id])
         self.th_dof = int(model.jnt_dofadr[model.joint("theta").id])
         self.th_qpos = int(model.jnt_qposadr[model.joint("theta").id])
         self.gear = float(model.actuator_gear[0, 0])
-        if model.nv != 2:
+        if model.nv != 2 or (self.x_dof, self.th_dof) != (0, 1):
             raise ValueError("PaperFrictionForce is for the 2-DOF pendulum slider")
         nv = model.nv
         self._bias = np.zeros(nv)
         self._rhs = np.zeros((2, nv))
         self._rhs[1, self.x_dof] = 1.0
         self._sol = np.zeros((2, nv))
-        #: the callback to install (a closure: cheaper for MuJoCo to call than this object)
-        self.callback = self._make_callback()
+        #: the stage law (a closure over the constants: it runs four times per step)
+        self.law = self._make_law()
 
-    def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        self.callback(m, d)
-
-    def _make_callback(self) -> Any:
-        """The force law as a closure over its constants (called at every RK4 stage: a few
-        reads of the binding's arrays, float arithmetic, one write)."""
-        xd, td, tq = self.x_dof, self.th_dof, self.th_qpos
-        m2l, m2gl, mt, J, gear = self.m2l, self.m2gl, self.mt, self.J, self.gear
+    def _make_law(self) -> StageLaw:
+        m2l, mt, J = self.m2l, self.mt, self.J
         mu, weight, sin, cos = self.mu, self.weight, math.sin, math.cos
-        cache: list[Any] = [None, ()]
 
-        def callback(m: mujoco.MjModel, d: mujoco.MjData) -> None:
-            if d is not cache[0]:                        # views of this MjData, made once
-                cache[0], cache[1] = d, (d.qpos, d.qvel, d.qfrc_passive, d.qfrc_applied,
-                                         d.ctrl)
-            qpos, qvel, qfrc_passive, qfrc_applied, ctrl = cache[1]
-            th, w = qpos.item(tq), qvel.item(td)
-            passive, applied = qfrc_passive.tolist(), qfrc_applied.tolist()
+        def law(x: float, th: float, v: float, w: float, ax: float, aw: float
+                ) -> tuple[float, float]:
             s, c = sin(th), cos(th)
-            tau_x = passive[xd] + applied[xd] + gear * ctrl.item(0) - m2l * s * w * w
-            tau_t = passive[td] + applied[td] - m2gl * s
             M12 = -m2l * c
             det = mt * J - M12 * M12
-            thdd0 = (mt * tau_t - M12 * tau_x) / det     # θ̈ without the friction force
-            minv_tx = -M12 / det                         # [M⁻¹]_θx
+            minv_tx = -M12 / det                         # [M⁻¹]_θx (= [M⁻¹]_xθ)
             c0 = -mu * (weight + m2l * c * w * w)
             c1 = -mu * m2l * s
-            qfrc_passive[xd] = passive[xd] + (c0 + c1 * thdd0) / (1.0 - c1 * minv_tx)
-        return callback
+            force = (c0 + c1 * aw) / (1.0 - c1 * minv_tx)
+            return ax + (J / det) * force, aw + minv_tx * force
+        return law
 
     def reference_force(self, m: mujoco.MjModel, d: mujoco.MjData) -> float:
-        """The same force from MuJoCo's ``mj_rne`` and ``mj_solveM`` (the callback's oracle)."""
+        """The same force from MuJoCo's ``mj_rne`` and ``mj_solveM`` (the law's oracle)."""
         mujoco.mj_rne(m, d, 0, self._bias)           # bias forces at this stage's state
         rhs = self._rhs[0]
         np.subtract(d.qfrc_passive, self._bias, out=rhs)
@@ -124,11 +110,11 @@ class PendulumSliderEnv(PlantEnv):
 
     * ``"paper"`` — eq (15)'s term ``-μ N`` with the true normal force ``N`` and no
       sign(ẋ): a constant push that moves the rest position from 25 mm to
-      10.8 mm. It is applied exactly at every RK4 stage by MuJoCo's passive-force
-      callback, installed only while this env steps (the callback is global to the
-      process and, left installed, would break model compilation everywhere; see
-      ``fir_gym.envs._mujoco_passive``), so the plant equals an RK4 integration of
-      the corrected ODE to round-off;
+      10.8 mm. It is applied exactly at every RK4 stage: the env runs MuJoCo's RK4
+      step itself with the force added to each stage's accelerations (no global
+      callback, so envs in several threads do not disturb each other; see
+      ``fir_gym.envs._mujoco_rk4``), and the plant equals an RK4 integration of the
+      corrected ODE to round-off;
     * ``"coulomb"`` — real dry friction: the slider rests on the rail (a vertical
       joint and a box-on-plane contact with friction μ, stiff ``solref``), so the
       friction is ``μ N sign(ẋ)`` with the true normal force and the slider sticks
@@ -203,7 +189,11 @@ class PendulumSliderEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     #: default FIR window (20 ms at 1 kHz)
     default_horizon: ClassVar[int] = 20
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
+    #: the slider's colour in the MJCF (the legend's "truth")
+    truth_color: ClassVar[tuple[int, int, int]] = (209, 84, 46)
+    #: MuJoCo's ``mjMAXVAL``: beyond it MuJoCo resets its simulation at the next step
+    state_limit: ClassVar[float] = 1e10
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100}  # noqa: RUF012
 
     def __init__(
         self,
@@ -299,9 +289,12 @@ class PendulumSliderEnv(PlantEnv):
         self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"],
                                                  p["I_c"])
                               if p["friction"] == "paper" else None)
+        self._stage_rk4 = (None if self._friction_law is None
+                           else StageRK4(m, self.mj_data, self._friction_law.law))
         # views into mj_data, read at every step (a view per attribute access costs more)
         self._qpos_view, self._qvel_view = self.mj_data.qpos, self.mj_data.qvel
         self._ctrl_view = self.mj_data.ctrl
+        self._warning_counts = self.mj_data.warning.number
         self._renderer: mujoco.Renderer | None = None
 
     def _settle_vertical(self) -> float:
@@ -342,15 +335,24 @@ class PendulumSliderEnv(PlantEnv):
         force = float(a[0]) * self.params["force_max"]
         d = self.mj_data
         self._ctrl_view[0] = force
-        law = self._friction_law
-        _mujoco_passive.step(self.mj_model, d, self.params["frame_skip"],
-                             None if law is None else law.callback)
+        if self._stage_rk4 is None:
+            mujoco.mj_step(self.mj_model, d, self.params["frame_skip"])
+        else:
+            self._stage_rk4.step(self.params["frame_skip"])
+        failure = reset_warning(self._warning_counts)
+        if failure is not None:
+            # MuJoCo found a NaN or a value beyond 1e10 and reset its data: the step failed
+            # (the base class ends the episode and restores ``x``, see _restore)
+            return x.copy(), {"force": force, "simulation_failure": failure}
         x_next = self._read_state()
         if self._has_process_noise:
             x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
             self._write_state(x_next)
             d.ctrl[0] = force
         return x_next, {"force": force}
+
+    def _restore(self, x: FloatArray) -> None:
+        self._write_state(x)
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return x.copy()
@@ -398,7 +400,34 @@ class PendulumSliderEnv(PlantEnv):
                     "without a display set MUJOCO_GL=egl (or osmesa) before importing mujoco"
                 ) from err
         self._renderer.update_scene(self.mj_data, camera="side")
-        return self._renderer.render()
+        frame = self._renderer.render()
+        self._frame_view = self._camera_view()
+        return frame
+
+    def _camera_view(self) -> CameraView:
+        """The "side" camera as the frame just rendered sees the world."""
+        m, d = self.mj_model, self.mj_data
+        cam = m.camera("side").id
+        (px, py, pz), axes = d.cam_xpos[cam].tolist(), d.cam_xmat[cam].reshape(3, 3).T
+        right, up, back = (tuple(row) for row in axes.tolist())  # rows of the transpose
+        return CameraView(self.width, self.height, int(self.time_step), self._sample_period(),
+                          (px, py, pz), (right, up, back), float(m.cam_fovy[cam]))
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The slider's and the bob's centres in MuJoCo's world (the bodies it draws).
+
+        The slider sits at ``(x, 0, z)`` (``z`` is 0, or its resting height on the rail
+        in the "coulomb" mode); the hinge about +y turns the bob's ``(0, 0, −L)`` into
+        ``(−L sin θ, 0, −L cos θ)`` (``L``: the bob geom's distance, 0.2 m).
+        """
+        z = self._z_rest or 0.0
+        L = -float(self.mj_model.geom("bob").pos[2])
+        p, th = float(x[0]), float(x[2])
+        return np.array([[p, 0.0, z], [p - L * math.sin(th), 0.0, z - L * math.cos(th)]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured slider position and angle place both bodies."""
+        return [(point, None) for point in self._picture(y)]
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -410,6 +439,7 @@ class PendulumSliderEnv(PlantEnv):
         state = self.__dict__.copy()
         state["_renderer"] = None
         state.pop("_friction_law")
+        state.pop("_stage_rk4")
         state["_saved_sim"] = (self.mj_data.qpos.copy(), self.mj_data.qvel.copy(),
                                self.mj_data.ctrl.copy(), float(self.mj_data.time))
         for key in ("mj_model", "mj_data"):

@@ -33,7 +33,7 @@ Pure numpy: usable by the MuJoCo plant and by filters alike; picklable.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -166,7 +166,9 @@ class PendulumSliderDynamics:
             Fz = np.broadcast_to(np.eye(4), x.shape[:-1] + (4, 4)).copy()
             Fp = np.zeros(x.shape[:-1] + (4, 2))
         for _ in range(self.substeps):
-            stages, Sz, Sp = [], [], []
+            stages: list[FloatArray] = []
+            Sz: list[FloatArray] = []
+            Sp: list[FloatArray] = []
             for coef in (0.0, 0.5, 0.5, 1.0):
                 zi = z if coef == 0.0 else z + (coef * h) * stages[-1]
                 a, Az, Ap = self.derivatives(zi, U, mu, M0, jacobian)
@@ -175,6 +177,7 @@ class PendulumSliderDynamics:
                     # ∂k_i/∂z0 = A_i (I + c h ∂k_{i-1}/∂z0);  ∂k_i/∂p = A_i c h ∂k_{i-1}/∂p + B_i
                     dz = Fz if coef == 0.0 else Fz + (coef * h) * Sz[-1]
                     dp = Fp if coef == 0.0 else Fp + (coef * h) * Sp[-1]
+                    Az, Ap = cast(FloatArray, Az), cast(FloatArray, Ap)   # given: jacobian
                     Sz.append(Az @ dz)
                     Sp.append(Az @ dp + Ap)
             z = z + (h / 6.0) * (stages[0] + 2.0 * stages[1] + 2.0 * stages[2] + stages[3])
@@ -204,7 +207,7 @@ class PendulumSliderDynamics:
     def jac_f(self, x: FloatArray, u: FloatArray, theta: FloatArray
               ) -> tuple[FloatArray, FloatArray]:
         _, Fz, Fp = self.propagate(x, u, theta, jacobian=True)
-        return Fz, Fp
+        return cast(FloatArray, Fz), cast(FloatArray, Fp)           # not None: jacobian
 
     def f_jac_f(self, x: FloatArray, u: FloatArray, theta: FloatArray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -306,7 +309,7 @@ class PendulumSliderDynamics:
         ``Q`` (scalar = per state, vector = diagonal, or matrix) and ``R`` default to
         paper 003's eqs 17–18: ``Q = 1e-6 I``, ``R = diag([0.003, 0.03, 0.03, 0.3]²)``.
         """
-        Q_ = np.full(4, float(Q)) if np.ndim(Q) == 0 else Q
+        Q_ = np.full(4, float(np.asarray(Q))) if np.ndim(Q) == 0 else Q
         return ParametricModel(f=self.f_theta, h=self.h_theta,
                                params={"mu": self.mu, "M0": self.M0}, Q=Q_, R=R, dt=self.dt,
                                jac_f=self.jac_f, jac_h=self.jac_h, n_u=1,

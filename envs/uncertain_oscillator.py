@@ -151,7 +151,7 @@ class UncertainOscillatorEnv(PlantEnv):
     state_names: ClassVar[tuple[str, ...]] = ("x1", "x2", "x3")
     measurement_names: ClassVar[tuple[str, ...]] = ("x1_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("force",)
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
 
     def __init__(
         self,
@@ -242,6 +242,14 @@ class UncertainOscillatorEnv(PlantEnv):
         delta = self.delta(self.time_step)
         if delta:
             canvas.rect(2.0, 0.6, 2.0 + min(abs(delta), 1.0) * 2.0, 0.75, _draw.BLUE)
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The centre of the mass at position ``x1`` (the rectangle :meth:`_draw` draws)."""
+        return np.array([[float(x[0]), -0.1]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured position ``x1``."""
+        return [(np.array([float(y[0]), -0.1]), None)]
 
 
 Window = tuple[int, int, float]

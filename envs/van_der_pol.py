@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -65,8 +65,10 @@ class VanDerPolDynamics(FirstStateMeasured):
 
     def integrate(
         self, x: FloatArray, u: FloatArray, dW: FloatArray | None = None, jacobian: bool = False
-    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    ) -> tuple[FloatArray, Any, FloatArray | None]:
         """Integrate one interval; returns ``(x_end, mean of x1 over the interval, Jacobian)``.
+
+        The mean is a float for one unbatched system, else an array of the batch's shape.
 
         ``dW`` holds the ``substeps`` Wiener increments (``None`` for noise-free).
         The interval mean of ``x1`` uses the trapezoid rule on the Heun grid.
@@ -79,6 +81,9 @@ class VanDerPolDynamics(FirstStateMeasured):
             return self._integrate_compiled(x, u, dW, jacobian)
         if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
             return self._integrate_rows(x, u, dW, jacobian)
+        x1: Any                                    # floats (one system) or arrays (a batch)
+        x2: Any
+        force: Any
         if single:
             x1, x2 = float(x.flat[0]), float(x.flat[1])
             force = float(np.asarray(u).flat[0]) * self.u_max
@@ -127,7 +132,7 @@ class VanDerPolDynamics(FirstStateMeasured):
         return x_end, x1_mean, Phi
 
     def _integrate_compiled(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
-                            jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                            jacobian: bool) -> tuple[FloatArray, Any, FloatArray | None]:
         """:meth:`integrate` by the compiled loop (:mod:`._interval_kernels`), same bits."""
         lead = x.shape[:-1]
         u = np.asarray(u, dtype=np.float64)
@@ -140,7 +145,7 @@ class VanDerPolDynamics(FirstStateMeasured):
                 Phi.reshape(lead + (2, 2)) if jacobian else None)
 
     def _integrate_rows(self, x: FloatArray, u: FloatArray, dW: FloatArray | None,
-                        jacobian: bool) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+                        jacobian: bool) -> tuple[FloatArray, Any, FloatArray | None]:
         """A small batch ``(B, 2)`` row by row on the float path (e.g. a UKF's sigma points).
 
         Bit for bit the batched loop (the same operations in the same order on each row),
@@ -158,12 +163,12 @@ class VanDerPolDynamics(FirstStateMeasured):
         return self.integrate(x, u)[0]
 
     def F(self, x: FloatArray, u: FloatArray) -> FloatArray:
-        return self.integrate(x, u, jacobian=True)[2]
+        return cast(FloatArray, self.integrate(x, u, jacobian=True)[2])   # not None: jacobian
 
     def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``f`` and ``F`` in one pass of the Heun loop."""
         x_end, _, Phi = self.integrate(x, u, jacobian=True)
-        return x_end, Phi
+        return x_end, cast(FloatArray, Phi)
 
 
 class VanDerPolEnv(PlantEnv):
@@ -250,7 +255,7 @@ class VanDerPolEnv(PlantEnv):
     state_names: ClassVar[tuple[str, ...]] = ("x1", "x2")
     measurement_names: ClassVar[tuple[str, ...]] = ("x1_average_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("force",)
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
 
     def __init__(
         self,
@@ -362,6 +367,14 @@ class VanDerPolEnv(PlantEnv):
         if len(trail) > 1:
             canvas.polyline(trail[:, 0], trail[:, 1], _draw.BLUE, width=1.5)
         canvas.circle(float(self.state[0]), float(self.state[1]), 0.03 * extent, _draw.ACCENT)
+
+    def _picture(self, x: FloatArray) -> FloatArray:
+        """The phase point ``(x1, x2)``."""
+        return np.array([[float(x[0]), float(x[1])]])
+
+    def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
+        """The measured ``x1`` (an interval average) leaves ``x2`` open: a vertical line."""
+        return [(np.array([float(y[0]), 0.0]), np.array([0.0, 1.0]))]
 
 
 def van_der_pol_continuous_model(params: Mapping[str, Any]) -> ContinuousModel:

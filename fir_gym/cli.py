@@ -10,7 +10,9 @@ Subcommands:
   the same run);
 * ``fir-gym train`` / ``evaluate`` / ``compare-controllers`` — controllers trained
   with stable-baselines3 on true states, raw measurements or estimates
-  (needs the ``rl`` extra).
+  (needs the ``rl`` extra);
+* ``fir-gym watch`` — one episode recorded as a GIF or MP4, the estimate drawn over
+  the plant (needs the ``video`` extra).
 """
 
 from __future__ import annotations
@@ -164,6 +166,28 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_watch(args: argparse.Namespace) -> int:
+    from .video import MissingExtra, watch
+
+    try:
+        rec = watch(args.env, args.out, estimator=args.estimator, policy=args.policy,
+                    steps=args.steps, seed=args.seed, fps=args.fps, every=args.every,
+                    estimator_kwargs=args.estimator_kwargs, env_kwargs=args.env_kwargs)
+    except (ValueError, TypeError, MissingExtra, gym_error()) as err:
+        print(f"fir-gym watch: error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {rec.path}: {rec.frames} frames at {rec.fps:g} fps, {rec.steps} steps, "
+          f"return {rec.episode_return:.4g}")
+    return 0
+
+
+def gym_error() -> type[Exception]:
+    """Gymnasium's error for an unknown environment id (and its other user errors)."""
+    from gymnasium import error
+
+    return error.Error
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fir-gym",
@@ -237,6 +261,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser(
+        "watch", help="record one episode as a GIF or MP4, the estimate drawn over the plant",
+        description="Record one episode with the estimate (and its 2σ region) and the "
+                    "measurement drawn over every frame. Needs the video extra: "
+                    'pip install "fir-gym[video]".')
+    p.add_argument("--env", default=None,
+                   help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
+                        "the run's)")
+    p.add_argument("--estimator", default=None,
+                   help="the estimator drawn, a registry name such as ekf (default with a run "
+                        "that observes an estimator: that one)")
+    p.add_argument("--policy", default="zero", metavar="zero|RUN",
+                   help="'zero' (no action) or a run folder written by `fir-gym train` "
+                        "(default: zero)")
+    p.add_argument("--steps", type=int, default=None,
+                   help="at most this many steps (default: the whole episode)")
+    p.add_argument("--seed", type=int, default=0, help="the episode's seed (default: 0)")
+    p.add_argument("--fps", type=float, default=None,
+                   help="frames per second (default: the plant's render_fps)")
+    p.add_argument("--every", type=int, default=1,
+                   help="keep every N-th step's frame (default: 1, every step)")
+    p.add_argument("--estimator-kwargs", type=_json_dict, default={},
+                   help="JSON object of estimator options, e.g. '{\"horizon\": 20}'")
+    p.add_argument("--env-kwargs", type=_json_dict, default={},
+                   help="JSON object of gym.make options, e.g. '{\"nominal\": {\"mu\": 19.9}}'")
+    p.add_argument("--out", required=True, help="the video file: FILE.gif or FILE.mp4")
+    p.set_defaults(func=_cmd_watch)
 
     p = sub.add_parser("speed", help="every speed figure in one run, as ratios to references",
                        add_help=False)

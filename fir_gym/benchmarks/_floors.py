@@ -28,13 +28,15 @@ def numpy_path(step: Any, k: int) -> Any:
 
 def mujoco_stepper(friction: str) -> Any:
     """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
-    from fir_gym.envs import _mujoco_passive
+    import mujoco
 
     env: Any = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
     env.reset(seed=0)
-    m, d, law = env.mj_model, env.mj_data, env._friction_law
-    nstep, callback = env.params["frame_skip"], None if law is None else law.callback
-    return lambda: _mujoco_passive.step(m, d, nstep, callback)
+    m, d, nstep = env.mj_model, env.mj_data, env.params["frame_skip"]
+    rk4 = env._stage_rk4
+    if rk4 is None:
+        return lambda: mujoco.mj_step(m, d, nstep)
+    return lambda: rk4.step(nstep)
 
 
 def trivial_ekf_step(n_batch: int) -> Any:

@@ -3,12 +3,14 @@
 from .baselines import MeasurementObservation, TrueStateObservation
 from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
 from .factory import wrap_observation
+from .shadow import ShadowEstimator
 from .vector_estimator_observation import VectorEstimatorObservation
 
 __all__ = [
     "OBSERVATION_KINDS",
     "EstimatorObservation",
     "MeasurementObservation",
+    "ShadowEstimator",
     "TrueStateObservation",
     "VectorEstimatorObservation",
     "default_prior",

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -17,28 +18,54 @@ from gymnasium import spaces
 
 
 class TrueStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
-    """Observe ``info["state"]`` (the true state) instead of the measurement."""
+    """Observe ``info["state"]`` (the true state) instead of the measurement.
+
+    fir-gym's plants never report a state that is not finite (a failed step ends the
+    episode at the last valid state); should another env do so, the observation
+    repeats the last finite state, the episode terminates and
+    ``info["simulation_failure"]`` is set (to ``"nonfinite_state"`` unless the env
+    said why).
+    """
 
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
-        n_x = len(getattr(env.unwrapped, "state_names", ())) or env.unwrapped.model.n_x
+        names, model = getattr(env.unwrapped, "state_names", ()), getattr(env.unwrapped,
+                                                                        "model", None)
+        if names:
+            n_x = len(names)
+        elif model is not None:
+            n_x = int(model.n_x)
+        else:
+            raise TypeError("TrueStateObservation needs a plant that names its state "
+                            "(state_names) or publishes a model")
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
+        self._last = np.zeros(n_x)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
         _, info = self.env.reset(seed=seed, options=options)
-        return self._state(info), info
+        self._last = self._state(info)
+        if not np.isfinite(self._last).all():
+            raise ValueError(f"the env's reset returned a state that is not finite: "
+                             f"{info['state']}")
+        return self._last.copy(), info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         _, reward, terminated, truncated, info = self.env.step(action)
-        return self._state(info), reward, terminated, truncated, info
+        state = self._state(info)
+        if not (math.isfinite(sum(state.tolist())) or np.isfinite(state).all()):
+            info = {**info, "simulation_failure": info.get("simulation_failure",
+                                                           "nonfinite_state")}
+            return self._last.copy(), reward, True, truncated, info
+        self._last = state
+        return state.copy(), reward, terminated, truncated, info
 
     @staticmethod
     def _state(info: dict[str, Any]) -> np.ndarray:
         if "state" not in info:
             raise KeyError("TrueStateObservation needs info['state'] from the plant")
-        return np.asarray(info["state"], dtype=np.float64).copy()
+        return np.array(info["state"], dtype=np.float64)
 
 
 class MeasurementObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):

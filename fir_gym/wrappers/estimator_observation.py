@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from fir_gym.estimators import Estimator, estimator_class
+from fir_gym.estimators import Estimator, estimator_class, estimator_names
 from fir_gym.estimators._validation import one_of
 
 OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
@@ -68,16 +68,69 @@ def resolve_estimator(
     """An estimator instance for ``env`` from an instance, a class or a registry name.
 
     Classes and names are built by :func:`build_estimator` from ``env.unwrapped``; an
-    instance is used as it is (``options`` must then be empty).
+    instance is used as it is (``options`` must then be empty), and must be one system
+    whose model fits the plant (:func:`check_fits`).
     """
+    plant = env.unwrapped
     if isinstance(estimator, Estimator):
         if options:
             raise ValueError(f"estimator options {sorted(options)} given with an estimator "
                              "instance; configure the instance instead")
-        return estimator
-    plant = env.unwrapped
-    return build_estimator(estimator_class_of(estimator),
-                           lambda name: getattr(plant, name, None), options)
+        if estimator.x.ndim != 1:
+            raise ValueError(f"estimator {type(estimator).__name__} runs a batch of "
+                             f"{estimator.x.shape[0]} systems; EstimatorObservation feeds one "
+                             "(use VectorEstimatorObservation for a vector env)")
+        built = estimator
+    else:
+        built = build_estimator(estimator_class_of(estimator),
+                                lambda name: getattr(plant, name, None), options)
+    check_fits(built, plant_dimensions(lambda name: getattr(plant, name, None),
+                                       env.observation_space, env.action_space),
+               plant_name(env))
+    return built
+
+
+def plant_dimensions(plant_attr: Callable[[str], Any], observation_space: Any,
+                     action_space: Any) -> dict[str, int]:
+    """The plant's ``n_x`` (its state names, else its model's), ``n_y`` and ``n_u`` (its
+    spaces, where they are flat boxes): what an estimator's model must have."""
+    dims: dict[str, int] = {}
+    names, model = plant_attr("state_names"), plant_attr("model")
+    if names:
+        dims["n_x"] = len(names)
+    elif model is not None:
+        dims["n_x"] = int(model.n_x)
+    for key, space in (("n_y", observation_space), ("n_u", action_space)):
+        if isinstance(space, spaces.Box) and len(space.shape) == 1:
+            dims[key] = int(space.shape[0])
+    return dims
+
+
+def check_fits(estimator: Estimator, dims: dict[str, int], plant: str) -> None:
+    """Refuse an estimator whose model's ``n_x``, ``n_y`` or ``n_u`` is not the plant's.
+
+    The state of an augmented model (:func:`~fir_gym.estimators.augment`) is the plant's
+    state followed by parameters: its ``n_base`` must be the plant's ``n_x``.
+    """
+    model = estimator.model
+    ours = {"n_x": state_size(model), "n_y": int(model.n_y), "n_u": int(model.n_u)}
+    wrong = [f"{key}={ours[key]} where the plant has {key}={want}"
+             for key, want in dims.items() if ours[key] != want]
+    if wrong:
+        raise ValueError(f"estimator {type(estimator).__name__} does not fit {plant}: its model "
+                         f"{model.name!r} has {'; '.join(wrong)}")
+
+
+def state_size(model: Any) -> int:
+    """How many leading components of the model's state are the plant's state (all of
+    them, except for an augmented model, whose parameters follow its ``n_base``)."""
+    return int(getattr(model, "n_base", model.n_x))
+
+
+def plant_name(env: Any) -> str:
+    """The id an env (or vector env) was made with, else its class name (for messages)."""
+    spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
+    return spec.id if spec is not None else type(env.unwrapped).__name__
 
 
 def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -87,6 +140,16 @@ def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.f
         return None, None
     x0 = np.array(x0, dtype=np.float64)
     return x0, np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
+
+
+def estimator_label(estimator: Estimator) -> str:
+    """How frames and legends name ``estimator``: its registry name in capitals (``"EKF"``),
+    else its class name."""
+    cls = type(estimator)
+    for name in estimator_names():
+        if estimator_class(name) is cls:
+            return name.upper()
+    return cls.__name__
 
 
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -122,6 +185,13 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``estimator_diverged`` and ``estimator_info`` (the filter's ``last_info``). A
     filter that diverges keeps returning its last finite estimate and says so;
     the observation is never NaN.
+
+    ``render()`` (with ``render_mode="rgb_array"``, or ``"rgb_array_list"`` through
+    ``gym.make``) draws, over the plant's frame, the estimate as magenta rings where it
+    puts the plant's bodies, its 2σ region where the filter has a covariance, the
+    measurement as teal crosses, a legend and the time (the plant's
+    :meth:`~fir_gym.envs._overlay.EstimateDrawing.draw_estimate`); the bare plant's
+    frame is ``env.unwrapped.render()``.
     """
 
     def __init__(
@@ -139,7 +209,11 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.observation_kind = observation
         self._x0 = self.estimator.x
         self._P0 = self.estimator.P
+        self.estimator_label = estimator_label(self.estimator)
+        self._last_estimate: NDArray[np.float64] | None = None
+        self._last_measurement: NDArray[np.float64] | None = None
         n_x = self.estimator.model.n_x
+        self._n_state = state_size(self.estimator.model)     # the plant's part of x_hat
         estimate = spaces.Box(-np.inf, np.inf, shape=(n_x,), dtype=np.float64)
         if observation == "estimate":
             self.observation_space = estimate
@@ -165,27 +239,48 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         y, info = self.env.reset(seed=seed, options=options)
         self.estimator.reset(self._x0, self._P0)
         x_hat = self.estimator.step(y)
+        self._remember(x_hat, y)
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         y, reward, terminated, truncated, info = self.env.step(action)
         u = info.get("action", action)
         x_hat = self.estimator.step(y, u)
+        self._remember(x_hat, y)
         return self._observe(x_hat, y), reward, terminated, truncated, self._annotate(info, x_hat)
 
+    def render(self) -> Any:
+        """The plant's frame with the estimate, its 2σ region and the measurement drawn
+        over it (see the class docstring); the plant's own frame where there is nothing
+        to draw (before the first ``reset``, or a plant that cannot place an estimate)."""
+        frame = self.env.render()
+        plant = self.env.unwrapped
+        draw = getattr(plant, "draw_estimate", None)
+        if not isinstance(frame, np.ndarray) or self._last_estimate is None or draw is None \
+                or getattr(plant, "frame_view", None) is None:
+            return frame
+        return draw(frame, self._last_estimate, self.estimator.P, self._last_measurement,
+                    label=self.estimator_label, diverged=bool(self.estimator.diverged))
+
     # ------------------------------------------------------------------ helpers
+    def _remember(self, x_hat: NDArray[np.float64], y: Any) -> None:
+        """What the next frame draws: the estimate and the measurement it came from."""
+        self._last_estimate = x_hat.copy()
+        self._last_measurement = np.array(y, dtype=np.float64)
+
     def _observe(self, x_hat: NDArray[np.float64], y: NDArray[np.float64]) -> Any:
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            return {"estimate": x_hat, "covariance": self.estimator.P[self._triu]}
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
+            return {"estimate": x_hat, "covariance": P[self._triu]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
     def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:
         info = dict(info)
         info["estimate"] = x_hat.copy()
         if "state" in info:
-            info["estimation_error"] = np.asarray(info["state"]) - x_hat
+            info["estimation_error"] = np.asarray(info["state"]) - x_hat[:self._n_state]
         info["estimator_diverged"] = bool(self.estimator.diverged)
         info["estimator_info"] = dict(self.estimator.last_info)
         return info

@@ -9,6 +9,7 @@ with; :func:`wrap_observation` does the same for an existing env from one word
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -52,6 +53,8 @@ def make_plant(
     """
     creator = load_env_creator(plant) if isinstance(plant, str) else plant
     env = creator(**plant_kwargs)
+    if not isinstance(env, gym.Env):
+        raise TypeError(f"plant must build a gymnasium Env; {plant!r} built {type(env).__name__}")
     if estimator is None:
         if estimator_kwargs:
             raise ValueError("estimator_kwargs given without an estimator")
@@ -65,20 +68,44 @@ def make_plant(
                                 **dict(estimator_kwargs or {}))
 
 
-def plant_factory(plant: str) -> Callable[..., gym.Env]:
+class PlantEntryPoint:
+    """The entry point of one plant: ``gym.make``'s creator, with the plant's ``metadata``.
+
+    Calling it is :func:`make_plant` for that plant. ``metadata`` (the plant class's, read
+    when first asked, so registering imports no plant) is what :func:`gymnasium.make`
+    reads to wrap an env as it wraps its own: ``render_mode="rgb_array_list"`` builds the
+    plant with ``"rgb_array"`` inside :class:`gymnasium.wrappers.RenderCollection`, and
+    ``render_mode="human"`` inside :class:`gymnasium.wrappers.HumanRendering` (which needs
+    pygame and a display).
+    """
+
+    def __init__(self, plant: str) -> None:
+        self.plant = plant
+        self.__doc__ = (f"Build {plant} with optional estimator/observation options "
+                        "(see make_plant).")
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """The plant class's metadata (its ``render_modes`` and ``render_fps``), a copy."""
+        return copy.deepcopy(getattr(load_env_creator(self.plant), "metadata", {}))
+
+    def __call__(self, **kwargs: Any) -> gym.Env:
+        return make_plant(self.plant, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"PlantEntryPoint({self.plant!r})"
+
+
+def plant_factory(plant: str) -> PlantEntryPoint:
     """An entry point for ``plant`` (``"module:Class"``) that accepts the estimator options."""
-
-    def make(**kwargs: Any) -> gym.Env:
-        return make_plant(plant, **kwargs)
-
-    make.__doc__ = f"Build {plant} with optional estimator/observation options (see make_plant)."
-    return make
+    return PlantEntryPoint(plant)
 
 
 def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
     """A ``vector_entry_point`` for ``plant``: a :class:`~fir_gym.envs._vector.PlantVectorEnv`."""
 
     def make_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+        from fir_gym.envs._base import PlantEnv
         from fir_gym.envs._vector import PlantVectorEnv
 
         for key in ("estimator", "estimator_kwargs", "observation"):
@@ -86,7 +113,11 @@ def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
                 raise ValueError(f"{key} is not an option of the native vector env; wrap it in "
                                  "fir_gym.wrappers.VectorEstimatorObservation instead")
             kwargs.pop(key, None)
-        return PlantVectorEnv(load_env_creator(plant), num_envs=num_envs, **kwargs)
+        plant_class: Any = load_env_creator(plant)
+        if not (isinstance(plant_class, type) and issubclass(plant_class, PlantEnv)):
+            raise TypeError(f"the native vector env needs a fir-gym plant class; {plant!r} is "
+                            f"{plant_class!r}")
+        return PlantVectorEnv(plant_class, num_envs=num_envs, **kwargs)
 
     make_vector.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
     return make_vector

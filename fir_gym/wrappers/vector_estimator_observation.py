@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -14,7 +14,16 @@ from numpy.typing import NDArray
 from fir_gym.estimators import Estimator
 from fir_gym.estimators._validation import one_of
 
-from .estimator_observation import OBSERVATION_KINDS, build_estimator, estimator_class_of
+from .estimator_observation import (
+    OBSERVATION_KINDS,
+    build_estimator,
+    check_fits,
+    estimator_class_of,
+    estimator_label,
+    plant_dimensions,
+    plant_name,
+    state_size,
+)
 
 
 class VectorEstimatorObservation(gym.vector.VectorWrapper):
@@ -38,6 +47,13 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     :class:`EstimatorObservation` would do. ``info`` gains ``estimate``,
     ``estimation_error`` (where ``state`` is known) and ``estimator_diverged``, each
     with Gymnasium's ``_key`` mask.
+
+    ``render()`` returns the vector env's frames (one per sub-env, with
+    ``render_mode="rgb_array"``) with each system's estimate, 2σ region and
+    measurement drawn over its sub-env's frame, as
+    :class:`~fir_gym.wrappers.EstimatorObservation` draws them. That needs the plant
+    behind each frame: a native or a sync vector env; the frames of an async one are
+    returned as they are.
     """
 
     def __init__(self, env: VectorEnv, estimator: type[Estimator] | str,
@@ -53,6 +69,11 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
                             "builds one batched estimator); got an instance")
         cls = estimator_class_of(estimator)
         self.estimator = build_estimator(cls, lambda name: _plant_attr(env, name), options)
+        check_fits(self.estimator, plant_dimensions(lambda name: _plant_attr(env, name),
+                                                    env.single_observation_space,
+                                                    env.single_action_space),
+                   plant_name(env))
+        self._n_state = state_size(self.estimator.model)
         self.observation_kind = observation
         n = self.num_envs
         n_x = self.estimator.model.n_x
@@ -72,13 +93,17 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         self.single_observation_space = single
         self.observation_space = batch_space(single, n)
         self._prev_done = np.zeros(n, dtype=bool)
+        self.estimator_label = estimator_label(self.estimator)
+        self._last: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
     def reset(self, *, seed: int | list[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        y, info = self.env.reset(seed=seed, options=options)
+        env: Any = self.env                    # its reset takes a list of seeds too
+        y, info = env.reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
         self._prev_done[:] = False
+        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
@@ -90,14 +115,31 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1),
                                     u)
         self._prev_done = np.logical_or(terminated, truncated)
+        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
         return self._observe(x_hat, y), reward, terminated, truncated, \
             self._annotate(info, x_hat)
+
+    def render(self) -> Any:
+        """The sub-envs' frames with each system's estimate drawn over its frame."""
+        frames: Any = self.env.render()
+        plants = _frame_plants(self.env, len(frames)) if isinstance(frames, (tuple, list)) \
+            else None
+        if plants is None or self._last is None:
+            return frames
+        x_hat, y = self._last
+        P = self.estimator.P
+        diverged = np.broadcast_to(np.asarray(self.estimator.diverged), (self.num_envs,))
+        return tuple(
+            plant.draw_estimate(frame, x_hat[i], None if P is None else P[i], y[i],
+                                label=self.estimator_label, diverged=bool(diverged[i]),
+                                view=view)
+            for i, (frame, (plant, view)) in enumerate(zip(frames, plants, strict=True)))
 
     def _observe(self, x_hat: NDArray[np.float64], y: Any) -> Any:
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            P = self.estimator.P
+            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
             return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
@@ -107,9 +149,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         info["estimate"], info["_estimate"] = x_hat.copy(), everyone
         if "state" in info:
             mask = info.get("_state", everyone)
-            error = np.asarray(info["state"]) - x_hat
+            error = np.asarray(info["state"]) - x_hat[:, :self._n_state]
+            # Gymnasium's convention: entries outside the mask are zeros (never NaN)
             info["estimation_error"] = error if mask.all() else np.where(mask[:, None], error,
-                                                                         np.nan)
+                                                                         0.0)
             info["_estimation_error"] = mask
         diverged = self.estimator.diverged                # a fresh array (or a bool)
         info["estimator_diverged"] = diverged if isinstance(diverged, np.ndarray) else \
@@ -124,7 +167,27 @@ def _plant_attr(env: VectorEnv, name: str) -> Any:
     plant = getattr(base, "plant", None)                 # fir-gym's native vector env
     if plant is not None:
         return getattr(plant, name, None)
+    get_attr = getattr(base, "get_attr", None)          # sync / async: from sub-env 0
     try:
-        return base.get_attr(name)[0]                   # sync / async: from sub-env 0
+        return None if get_attr is None else get_attr(name)[0]
     except AttributeError:
         return None
+
+
+def _frame_plants(env: VectorEnv, n: int) -> list[tuple[Any, Any]] | None:
+    """``(plant, view)`` behind each of the ``n`` frames the vector env just rendered:
+    the native env's plant with each frame's view, or a sync env's sub-env plants; None
+    where they cannot be reached (an async env) or cannot draw an estimate."""
+    base = env.unwrapped
+    views, plant = getattr(base, "frame_views", None), getattr(base, "plant", None)
+    if views is not None and plant is not None:                           # native
+        pairs = [(plant, view) for view in views]
+    elif hasattr(base, "envs"):                                           # sync
+        plants = [sub.unwrapped for sub in base.envs]
+        pairs = [(plant, getattr(plant, "frame_view", None)) for plant in plants]
+    else:
+        return None
+    if len(pairs) != n or any(view is None or not hasattr(plant, "draw_estimate")
+                              for plant, view in pairs):
+        return None
+    return pairs

@@ -6,50 +6,69 @@ import numpy as np
 import pytest
 
 import fir_gym  # noqa: F401
-from fir_gym.envs import _mujoco_passive
+from fir_gym.envs._mujoco_rk4 import StageRK4
 from fir_gym.estimators import compiled
 
 
-def test_paper_friction_callback_equals_mujoco_rne_and_solveM():
-    """The callback's closed-form 2-DOF mass matrix and bias forces give the force that
-    MuJoCo's own ``mj_rne`` + ``mj_solveM`` give, at random states, inputs and applied
-    forces (as at an RK4 stage: after mj_fwdPosition and the passive forces)."""
+def test_paper_friction_law_equals_mujoco_with_the_reference_force_applied():
+    """The law's closed-form 2-DOF mass matrix turns MuJoCo's accelerations without the
+    force into the accelerations MuJoCo computes with the force (from MuJoCo's own
+    ``mj_rne`` + ``mj_solveM``) applied, at random states, inputs and applied forces."""
     env = gym.make("fir_gym/PendulumSlider-v0", friction="paper").unwrapped
     env.reset(seed=0)
-    m, d, law = env.mj_model, env.mj_data, env._friction_law
+    m, d, friction = env.mj_model, env.mj_data, env._friction_law
     rng = np.random.default_rng(0)
     for _ in range(200):
         d.qpos[:] = rng.uniform([-0.3, -np.pi], [0.3, np.pi])
         d.qvel[:] = rng.normal(scale=[1.0, 6.0])
         d.ctrl[0] = rng.uniform(-10, 10)
-        d.qfrc_applied[:] = rng.normal(size=2)
-        mujoco.mj_forward(m, d)                           # passive forces, mass matrix
-        ref = law.reference_force(m, d)
-        before = d.qfrc_passive.copy()
-        law(m, d)
-        force = d.qfrc_passive[law.x_dof] - before[law.x_dof]
-        assert abs(force - ref) <= 1e-12 * max(1.0, abs(ref))
-        assert d.qfrc_passive[law.th_dof] == before[law.th_dof]
+        applied = rng.normal(size=2)
+        d.qfrc_applied[:] = applied
+        mujoco.mj_forward(m, d)                           # accelerations without the force
+        (x, th), (v, w) = d.qpos.tolist(), d.qvel.tolist()
+        without = d.qacc.copy()
+        law = friction.law(x, th, v, w, *without.tolist())
+        force = friction.reference_force(m, d)
+        d.qfrc_applied[friction.x_dof] += force
+        mujoco.mj_forward(m, d)                           # MuJoCo with the force applied
+        scale = max(1.0, float(np.max(np.abs(d.qacc))))
+        np.testing.assert_allclose(law, d.qacc, rtol=0, atol=1e-12 * scale)
+        assert np.max(np.abs(d.qacc - without)) > 1e-2    # the force is not negligible
 
 
-def test_step_helper_equals_the_context_manager():
-    """``_mujoco_passive.step`` is ``with passive_force(law): mj_step`` (bit for bit)."""
+def test_stage_rk4_with_a_law_that_adds_nothing_is_mj_step_bit_for_bit():
+    """``StageRK4`` is MuJoCo's own RK4 step (stages, tableau, order of operations,
+    checks): with an identity law it gives ``mj_step``'s numbers exactly, so the force
+    law is the only thing it changes."""
     runs = []
-    for helper in (True, False):
-        env = gym.make("fir_gym/PendulumSlider-v0", friction="paper").unwrapped
+    for ours in (True, False):
+        env = gym.make("fir_gym/PendulumSlider-v0", friction="none").unwrapped
         env.reset(seed=0, options={"state": [0.02, 0.1, 0.7, -1.0]})
-        m, d, law = env.mj_model, env.mj_data, env._friction_law
+        m, d = env.mj_model, env.mj_data
+        rk4 = StageRK4(m, d, lambda x, th, v, w, ax, aw: (ax, aw))
+        trajectory = []
         for k in range(300):
             d.ctrl[0] = 3.0 * np.sin(0.01 * k)
-            if helper:
-                _mujoco_passive.step(m, d, 2, law)
+            d.qfrc_applied[1] = 0.1 * np.cos(0.02 * k)
+            if ours:
+                rk4.step(2)
             else:
-                with _mujoco_passive.passive_force(law):
-                    for _ in range(2):
-                        mujoco.mj_step(m, d)
-        runs.append(np.concatenate([d.qpos, d.qvel]))
+                mujoco.mj_step(m, d, 2)
+            trajectory.append(np.concatenate([d.qpos, d.qvel, [d.time]]))
+        runs.append(np.array(trajectory))
     np.testing.assert_array_equal(runs[0], runs[1])
     assert mujoco.get_mjcb_passive() is None
+
+
+def test_stage_rk4_refuses_models_it_does_not_reproduce():
+    coulomb = gym.make("fir_gym/PendulumSlider-v0", friction="coulomb").unwrapped
+    with pytest.raises(ValueError, match="nq = nv = 2"):
+        StageRK4(coulomb.mj_model, coulomb.mj_data, lambda *z: z[4:])
+    euler = mujoco.MjModel.from_xml_string(
+        '<mujoco><option integrator="Euler"/><worldbody><body><joint type="slide"/>'
+        '<joint type="hinge" axis="0 1 0"/><geom size="0.1"/></body></worldbody></mujoco>')
+    with pytest.raises(ValueError, match="RK4"):
+        StageRK4(euler, mujoco.MjData(euler), lambda *z: z[4:])
 
 
 @pytest.mark.parametrize("value", [0.3, -0.7, 1.0, -1.0, 1.5, -3.0, 0.0, -0.0, 1e30])

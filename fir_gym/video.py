@@ -1,0 +1,248 @@
+"""Recording an episode with an estimator in the loop as a video: ``fir-gym watch``.
+
+:func:`watch` runs one episode of a plant with ``render_mode="rgb_array"``, the
+estimator's marker, 2σ region and the measurement drawn over every frame
+(:meth:`fir_gym.wrappers.EstimatorObservation.render`), driven by a policy:
+
+* ``"zero"`` — no action (the plant's free motion);
+* a run folder written by ``fir-gym train`` (``run.json``, ``model.zip``,
+  ``vecnormalize.pkl``) — the trained controller, fed the observation it was trained
+  on, normalised with the run's statistics. A run that observes an estimator is
+  watched with that estimator; one that observes the true state or the raw
+  measurement is watched with ``estimator`` running beside it
+  (:class:`~fir_gym.wrappers.ShadowEstimator`).
+
+Frames are written with imageio: ``.gif`` with Pillow (imageio's own dependency),
+``.mp4`` with the ffmpeg binary of the ``imageio-ffmpeg`` wheel. Both come with the
+``video`` extra: ``pip install "fir-gym[video]"``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from .wrappers import ShadowEstimator, wrap_observation
+
+#: the file types :func:`watch` writes
+VIDEO_SUFFIXES = (".gif", ".mp4")
+#: what ``--policy`` accepts besides a run folder
+POLICIES = ("zero",)
+EXTRA = 'pip install "fir-gym[video]"'
+
+Policy = Callable[[Any], NDArray[Any]]
+
+
+class MissingExtra(ModuleNotFoundError):
+    """A package of an optional extra is not installed; the message says how to get it."""
+
+
+@dataclass(frozen=True)
+class Recording:
+    """What :func:`watch` wrote: the file, its frames, the steps and the episode's return."""
+
+    path: Path
+    frames: int
+    steps: int
+    episode_return: float
+    fps: float
+
+
+def watch(
+    env_id: str | None,
+    out: str | Path,
+    *,
+    estimator: str | None = None,
+    policy: str | Path = "zero",
+    steps: int | None = None,
+    seed: int = 0,
+    fps: float | None = None,
+    every: int = 1,
+    estimator_kwargs: Mapping[str, Any] | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
+) -> Recording:
+    """Record one episode of ``env_id`` with ``estimator`` drawn over it to ``out``.
+
+    Args:
+        env_id: the environment id (``None`` with a run folder: the run's).
+        out: the video file, ``.gif`` or ``.mp4``.
+        estimator: the estimator drawn (a registry name); with a run that observes an
+            estimator, ``None`` or that estimator.
+        policy: ``"zero"`` or a run folder of ``fir-gym train``.
+        steps: at most this many steps (default: the episode's length).
+        seed: the episode's seed (``reset(seed=...)``).
+        fps: frames per second of the video (default: the plant's ``render_fps``).
+        every: keep every ``every``-th step's frame (the first frame is ``reset``'s).
+        estimator_kwargs, env_kwargs: options of the estimator and of ``gym.make``.
+
+    Returns:
+        A :class:`Recording`. Raises ``ValueError`` naming the argument for bad input
+        and :class:`MissingExtra` when the ``video`` extra (or, for a run, ``rl``) is
+        missing.
+    """
+    path = Path(out)
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise ValueError(f"out must end in {' or '.join(VIDEO_SUFFIXES)}; got {str(out)!r}")
+    for name, value in (("steps", steps), ("every", every)):
+        if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):
+            raise ValueError(f"{name} must be a positive integer; got {value!r}")
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number; got {fps!r}")
+    writer_factory = _writer_for(path)                  # a missing extra fails before the run
+    env, act = _env_and_policy(env_id, estimator, policy, dict(estimator_kwargs or {}),
+                               dict(env_kwargs or {}))
+    rate = float(fps or env.metadata.get("render_fps", 30))
+    limit = steps if steps is not None else (env.spec.max_episode_steps if env.spec else None)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    obs, _ = env.reset(seed=seed)
+    total, k, frames = 0.0, 0, 1
+    with writer_factory(rate) as write:
+        write(_frame(env))
+        while limit is None or k < limit:
+            obs, reward, terminated, truncated, _ = env.step(act(obs))
+            k += 1
+            total += float(reward)
+            if k % every == 0 or terminated or truncated:
+                write(_frame(env))
+                frames += 1
+            if terminated or truncated:
+                break
+    env.close()
+    return Recording(path, frames, k, total, rate)
+
+
+def _frame(env: gym.Env) -> NDArray[np.uint8]:
+    frame = env.render()
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"the env rendered {type(frame).__name__}, not an rgb_array frame")
+    return frame
+
+
+# ---------------------------------------------------------------------- policies
+def _env_and_policy(env_id: str | None, estimator: str | None, policy: str | Path,
+                    estimator_kwargs: dict[str, Any], env_kwargs: dict[str, Any]
+                    ) -> tuple[gym.Env, Policy]:
+    """The env to record (rendering ``rgb_array``) and the policy that drives it."""
+    if str(policy) in POLICIES:
+        if env_id is None:
+            raise ValueError("env is needed unless the policy is a run folder")
+        if estimator is None:
+            raise ValueError("estimator is needed: the video draws its estimate")
+        env = gym.make(env_id, render_mode="rgb_array", estimator=estimator,
+                       estimator_kwargs=estimator_kwargs, **env_kwargs)
+        zeros: NDArray[Any] = np.zeros(env.action_space.shape or (), dtype=np.float32)
+        return env, lambda obs: zeros
+    return _run_env_and_policy(Path(policy), env_id, estimator, estimator_kwargs, env_kwargs)
+
+
+def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
+                        estimator_kwargs: dict[str, Any], env_kwargs: dict[str, Any]
+                        ) -> tuple[gym.Env, Policy]:
+    """A trained run's controller on the env it was trained on, rendering its frames."""
+    from .training import RunConfig, make_env
+
+    if not (run / "run.json").is_file():
+        raise ValueError(f"policy must be one of {', '.join(POLICIES)} or a run folder of "
+                         f"`fir-gym train` (with run.json); {str(run)!r} is neither")
+    config = RunConfig(**json.loads((run / "run.json").read_text()))
+    if env_id is not None and env_id != config.env_id:
+        raise ValueError(f"env is {env_id!r} but the run {str(run)!r} was trained on "
+                         f"{config.env_id!r} (leave env out to use the run's)")
+    kind = config.observation_kind
+    kwargs = {**config.env_kwargs, **env_kwargs, "render_mode": "rgb_array"}
+    if kind in ("true", "measurement"):
+        if estimator is None:
+            raise ValueError(f"estimator is needed: the run's controller observes {kind!r}; "
+                             "the video draws an estimator running beside it")
+        plant = gym.make(config.env_id, **kwargs)
+        env = wrap_observation(ShadowEstimator(plant, estimator, **estimator_kwargs), kind)
+    else:
+        if estimator is not None and estimator != kind:
+            raise ValueError(f"estimator is {estimator!r} but the run's controller observes "
+                             f"{kind!r}: leave estimator out (or give {kind!r})")
+        if estimator_kwargs:
+            raise ValueError("estimator_kwargs cannot change the estimator the run was "
+                             "trained with")
+        env = make_env(dataclasses.replace(config, env_kwargs=kwargs))
+    return env, _trained_policy(run, config.algo, env)
+
+
+def _trained_policy(run: Path, algo: str, env: gym.Env) -> Policy:
+    """The run's deterministic policy, its observations normalised as in training."""
+    try:
+        from stable_baselines3 import PPO, SAC
+        from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    except ModuleNotFoundError as err:
+        raise MissingExtra(f"a run's policy needs stable-baselines3 ({err.name} is missing): "
+                           'pip install torch==2.13.0 && pip install "fir-gym[rl]"') from None
+    algorithm: Any = {"ppo": PPO, "sac": SAC}[algo]
+    model = algorithm.load(run / "model.zip", device="cpu")
+    stats = VecNormalize.load(str(run / "vecnormalize.pkl"), DummyVecEnv([lambda: env]))
+
+    def act(obs: Any) -> NDArray[Any]:
+        action, _ = model.predict(stats.normalize_obs(obs), deterministic=True)
+        return np.asarray(action)
+
+    return act
+
+
+# ---------------------------------------------------------------------- writers
+class _Writer:
+    """A context manager that appends frames to a GIF or an MP4 file."""
+
+    def __init__(self, path: Path, fps: float) -> None:
+        self.path, self.fps = path, fps
+        self._writer: Any = None
+
+    def __enter__(self) -> Callable[[NDArray[np.uint8]], None]:
+        import imageio.v2 as imageio
+
+        if self.path.suffix.lower() == ".gif":
+            # Pillow's GIF: durations in milliseconds, loop forever
+            self._writer = imageio.get_writer(self.path, mode="I", duration=1000.0 / self.fps,
+                                              loop=0)
+        else:
+            # ffmpeg (imageio-ffmpeg's binary): H.264 in yuv420p, which wants even sizes
+            self._writer = imageio.get_writer(self.path, fps=self.fps, codec="libx264",
+                                              pixelformat="yuv420p", macro_block_size=2,
+                                              ffmpeg_log_level="error")
+        return self._append
+
+    def _append(self, frame: NDArray[np.uint8]) -> None:
+        if self.path.suffix.lower() == ".mp4":
+            frame = _even(frame)
+        self._writer.append_data(frame)
+
+    def __exit__(self, *exc: object) -> None:
+        self._writer.close()
+
+
+def _even(frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """``frame`` padded by edge pixels to even height and width (H.264 in yuv420p)."""
+    h, w = frame.shape[:2]
+    if h % 2 == 0 and w % 2 == 0:
+        return frame
+    return np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+
+
+def _writer_for(path: Path) -> Callable[[float], _Writer]:
+    """A writer factory for ``path``'s type, once its packages are known to be there."""
+    try:
+        import imageio  # noqa: F401
+    except ModuleNotFoundError:
+        raise MissingExtra(f"writing {path.suffix} needs imageio: {EXTRA}") from None
+    if path.suffix.lower() == ".mp4":
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ModuleNotFoundError:
+            raise MissingExtra(f"writing .mp4 needs imageio-ffmpeg (its ffmpeg binary): "
+                               f"{EXTRA}, or write a .gif") from None
+    return lambda fps: _Writer(path, fps)

@@ -1,0 +1,81 @@
+"""Reading the plants' frames back: where a plant drew its true state, and overlay colours.
+
+The oracle of the estimate-drawing tests is the plant's own drawing: the centroid of
+the patch each plant paints for its true state (the orbit's body, the oscillator's
+mass, the carrier's deck, the Van der Pol phase point; for the MuJoCo pendulum the
+slider and bob geoms, read from MuJoCo's segmentation rendering). A marker drawn for
+an estimate ``x̂`` must sit where the plant, put at ``x̂``, draws its own bodies.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import mujoco
+import numpy as np
+
+from fir_gym.envs import _draw
+
+ESTIMATE = np.array(_draw.ESTIMATE, dtype=np.uint8)
+MEASUREMENT = np.array(_draw.MEASUREMENT, dtype=np.uint8)
+
+#: the colour of the patch each numpy plant paints for its true state
+TRUTH_COLOUR = {
+    "OrbitEnv": _draw.ACCENT,
+    "UncertainOscillatorEnv": _draw.ACCENT,
+    "CarrierMotionEnv": _draw.GREY,          # the deck strip
+    "VanDerPolEnv": _draw.ACCENT,
+}
+
+
+def pixels_of(frame: np.ndarray, colour) -> np.ndarray:
+    """Pixel centres ``(n, 2)`` as (column, row) of the pixels of exactly ``colour``."""
+    rows, cols = np.nonzero(np.all(frame == np.asarray(colour, dtype=np.uint8), axis=-1))
+    return np.stack([cols + 0.5, rows + 0.5], axis=1)
+
+
+def centroid(points: np.ndarray) -> np.ndarray:
+    assert len(points), "no pixels of that colour"
+    return points.mean(axis=0)
+
+
+def near(points: np.ndarray, centre, radius: float) -> np.ndarray:
+    return points[np.hypot(*(points - np.asarray(centre)).T) <= radius]
+
+
+def truth_centroids(plant) -> np.ndarray:
+    """Where ``plant`` (rendered just now) drew its true state: ``(m, 2)`` pixel centroids."""
+    name = type(plant).__name__
+    if name == "PendulumSliderEnv":
+        renderer = mujoco.Renderer(plant.mj_model, plant.height, plant.width)
+        try:
+            renderer.enable_segmentation_rendering()
+            renderer.update_scene(plant.mj_data, camera="side")
+            seg = renderer.render()
+        finally:
+            renderer.close()
+        out = []
+        for geom in ("slider", "bob"):
+            mask = (seg[..., 0] == plant.mj_model.geom(geom).id) & \
+                (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM)
+            rows, cols = np.nonzero(mask)
+            out.append((cols.mean() + 0.5, rows.mean() + 0.5))
+        return np.array(out)
+    frame = plant.render()
+    return centroid(pixels_of(frame, TRUTH_COLOUR[name]))[None]
+
+
+def plant_at(plant, x) -> object:
+    """A copy of ``plant`` whose true state is ``x`` (rendered once, so it has a view)."""
+    other = copy.deepcopy(plant)
+    other.state = np.asarray(x, dtype=np.float64).copy()
+    if hasattr(other, "_write_state"):                   # MuJoCo: the simulation too
+        other._write_state(other.state)
+    other.render()
+    return other
+
+
+def same_mapping(a, b) -> bool:
+    """Whether two frame views map the world to pixels alike (times may differ)."""
+    strip = lambda v: {k: val for k, val in vars(v).items() if k not in ("step", "dt")}  # noqa: E731
+    return type(a) is type(b) and strip(a) == strip(b)
