@@ -192,7 +192,7 @@ def _slider_rk4(x: np.ndarray, U: np.ndarray, theta: np.ndarray, c_: np.ndarray,
                 coef = coefs[st]
                 for i in range(4):
                     zi[i] = z[i] if coef == 0.0 else z[i] + (coef * h) * K[st - 1, i]
-                _slider_derivativesjit(zi, Ub, mu, M0, c_, friction, jacobian, K[st], J)
+                _slider_derivatives_compiled(zi, Ub, mu, M0, c_, friction, jacobian, K[st], J)
                 if jacobian:        # ∂k_i/∂z0 = A_i (I + c h ∂k_{i-1}/∂z0), ∂k_i/∂p likewise
                     for i in range(4):
                         for j in range(4):
