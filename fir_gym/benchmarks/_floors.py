@@ -4,11 +4,15 @@ Each is one call, timed in the same alternating blocks as what it bounds:
 :func:`numpy_path` (a step with the compiled kernels off), :func:`mujoco_stepper`
 (MuJoCo's own steps of one PendulumSlider-v0 env step), :func:`trivial_ekf_step`
 (the filter's fixed cost), :func:`trivial_ekf_kernel` (that step's compiled kernel
-alone) and :func:`model_evaluation` (what an EKF step must evaluate of a plant's model).
+alone), :func:`kalman_kernels_skipped` (the step without its kernel: its Python side) and
+:func:`model_evaluation` (what an EKF step must evaluate of a plant's model).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
@@ -71,6 +75,25 @@ def trivial_ekf_kernel(n_batch: int) -> Any:
             ekf._all_valid, ekf._all_predict, ekf._diverged, ekf._nis_run, ekf._nis,
             ekf._limits)
     return lambda: kalman.predict_update(*args)
+
+
+@contextmanager
+def kalman_kernels_skipped() -> Iterator[None]:
+    """A block in which the EKF's compiled kernels are no-ops: what a step then costs is its
+    Python side alone (checks, model calls, the kernel's arguments, copies)."""
+    from fir_gym.estimators import extended
+
+    real = extended.compiled_kalman
+    extended.compiled_kalman = SimpleNamespace(           # type: ignore[assignment]
+        predict_update=_no_op, linear_step=_no_op)
+    try:
+        yield
+    finally:
+        extended.compiled_kalman = real
+
+
+def _no_op(*args: Any) -> None:
+    return None
 
 
 def model_evaluation(estimator: Any) -> Any:

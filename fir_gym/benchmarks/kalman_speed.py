@@ -28,7 +28,7 @@ from ..tables import format_table
 from . import _floors
 from . import fir as fir_bench
 from . import kalman as kalman_bench
-from ._timing import counting, interleaved
+from ._timing import counting, interleaved, per_call
 from .targets import ratio
 
 #: (model, row name, class, data, options); "kf": the converged (steady-state) regime,
@@ -96,17 +96,24 @@ def kalman_section(quick: bool) -> dict[str, Any]:
 
 
 def fixed_cost(quick: bool) -> list[dict[str, Any]]:
-    """µs of a one-state EKF step whose model returns ready arrays, and of its compiled
-    kernel alone (same arguments), at B = 1 and 64."""
+    """µs of a one-state EKF step whose model returns ready arrays, of its compiled kernel
+    alone (same arguments), and of the step with its kernel a no-op (its Python side: the
+    fixed cost), at B = 1 and 64."""
     out = []
+    calls, reps = (2000, 5) if quick else (20000, 9)
     for n_batch in (1, 64):
-        runs = {"step": (_floors.trivial_ekf_step(n_batch), 2000 if quick else 20000)}
+        step = _floors.trivial_ekf_step(n_batch)
+        runs = {"step": (step, calls)}
         if compiled.ENABLED:
-            runs["kernel"] = (_floors.trivial_ekf_kernel(n_batch), 2000 if quick else 20000)
-        t = interleaved(runs, 5 if quick else 9)
-        step, kernel = 1e6 * t["step"], (1e6 * t["kernel"] if "kernel" in t else None)
-        out.append({"batch": n_batch, "step_us": step, "kernel_us": kernel,
-                    "python_us": None if kernel is None else step - kernel})
+            runs["kernel"] = (_floors.trivial_ekf_kernel(n_batch), calls)
+        t = interleaved(runs, reps)
+        python = None
+        if compiled.ENABLED:
+            with _floors.kalman_kernels_skipped():
+                python = 1e6 * per_call(step, calls, reps)
+        out.append({"batch": n_batch, "step_us": 1e6 * t["step"],
+                    "kernel_us": 1e6 * t["kernel"] if "kernel" in t else None,
+                    "python_us": python})
     return out
 
 
@@ -165,6 +172,6 @@ def print_kalman(res: dict[str, Any]) -> None:
     print("\n   Estimator.step's fixed cost (one-state EKF, model callables returning ready "
           "arrays): µs per step\n")
     print(format_table(["systems", "whole step", "its compiled kernel alone",
-                        "Python boundary (difference)"],
+                        "the step with a no-op kernel (its Python side)"],
                        [[f["batch"], f["step_us"], f["kernel_us"], f["python_us"]]
                         for f in res["fixed_cost"]], floatfmt=".3g"))

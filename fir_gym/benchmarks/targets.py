@@ -16,7 +16,7 @@ from typing import Any
 from ..tables import format_table
 
 #: (filter, model) -> (single / filterpy, B = 1024 µs per system-step)
-KALMAN_LIMITS = {("kf", "linear 2x1"): (0.35, 0.1), ("kf-full", "linear 2x1"): (0.35, 0.1),
+KALMAN_LIMITS = {("kf", "linear 2x1"): (0.35, 0.1), ("kf-full", "linear 2x1"): (0.35, 0.5),
                  ("ekf", "linear 2x1"): (0.35, 0.5), ("ukf", "linear 2x1"): (0.5, 2.0),
                  ("ekf", "nonlinear 4x2"): (1.0, 0.45), ("ukf", "nonlinear 4x2"): (0.2, 2.0)}
 
