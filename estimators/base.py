@@ -66,7 +66,16 @@ from .model import StateSpaceModel
 NAN_POLICIES = ("raise", "skip")
 
 _F64 = np.dtype(np.float64)
-_add = np.add.reduce
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """Whether every value of ``a`` is finite. A few values are summed as Python floats
+    (faster than any numpy call; a sum that is not finite, from a NaN, an inf or an
+    overflow, is looked at value by value); more go to ``np.isfinite`` (a numpy sum
+    would warn when it overflows)."""
+    if a.size <= 16 and math.isfinite(sum(a.ravel().tolist())):
+        return True
+    return bool(np.isfinite(a).all())
 
 
 class Estimator(ABC):
@@ -213,11 +222,11 @@ class Estimator(ABC):
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
         """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``.
 
-        The boundary checks are cheap (a type test, a shape comparison, one sum for
-        finiteness); the step is then the compiled twin or the numpy reference (see
-        the module docstring). Floating-point warnings are silenced inside the
-        numpy hooks: a diverging filter is reported through :attr:`diverged`, not
-        through ``RuntimeWarning``.
+        The boundary checks are cheap (a type test, a shape comparison, a finiteness
+        test: a Python sum of up to 16 values, else ``np.isfinite``); the step is then
+        the compiled twin or the numpy reference (see the module docstring).
+        Floating-point warnings are silenced inside the numpy hooks: a diverging filter
+        is reported through :attr:`diverged`, not through ``RuntimeWarning``.
         """
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
@@ -404,13 +413,9 @@ class Estimator(ABC):
             Y = y[None] if self._single else y
         else:
             Y = self._first_measurement(y)
-        # one sum tells whether every value is finite (a few values: faster on floats)
-        fine = math.isfinite(sum(Y.ravel().tolist()) if Y.size <= 16 else _add(Y, None))
-        if fine:
+        if _all_finite(Y):
             return Y, self._all_valid
         valid = np.all(np.isfinite(Y), axis=1)
-        if valid.all():                                 # the sum overflowed; all finite
-            return Y, self._all_valid
         if self.nan_policy == "raise":
             raise ValueError("y must be finite (nan_policy='raise'); got NaN or inf in the "
                              "measurement. Pass nan_policy='skip' to treat it as missing.")
@@ -443,7 +448,7 @@ class Estimator(ABC):
             U = u.reshape(1, n_u) if n_b == 1 else np.broadcast_to(u.reshape(1, n_u), U.shape)
         else:
             raise ValueError(f"u must have shape ({n_u},) or ({n_b}, {n_u}); got {u.shape}")
-        if n_u and not math.isfinite(_add(U, None)):
+        if n_u and not _all_finite(u):
             raise ValueError("u must be finite")
         return U
 

@@ -74,3 +74,20 @@ def test_ragged_input_is_a_value_error_naming_the_argument():
     flt = KalmanFilter(LINEAR)
     with pytest.raises(ValueError, match=r"^y must be an array of real numbers"):
         flt.step([[0.1], [0.2, 0.3]])
+
+
+@pytest.mark.parametrize("batch", [None, 3, 20])         # 20 systems: over 16 values
+def test_finiteness_is_exact_although_checked_with_one_sum(batch):
+    """Huge finite values whose sum overflows are accepted; one NaN or inf is refused."""
+    shape = (1,) if batch is None else (batch, 1)
+    big = np.full(shape, 1e308)
+    flt = KalmanFilter(LINEAR, nan_policy="raise")
+    flt.step(big)
+    flt.step(big, big)                                     # y and u: sums overflow, all finite
+    for bad in (np.nan, np.inf, -np.inf):
+        worse = big.copy()
+        worse.flat[-1] = bad
+        with pytest.raises(ValueError, match="y must be finite"):
+            flt.step(worse)
+        with pytest.raises(ValueError, match="u must be finite"):
+            flt.step(big, worse)
