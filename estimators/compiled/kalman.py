@@ -110,6 +110,7 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
     belongs to system ``b0 + t``; of ``ok``, ``K``, ``W``, ``Pm``, ``Pp`` column ``c0 + t`` (``0``
     for all where ``shared``). Returns whether every estimate was stored."""
     n, m = Xm.shape[0], E.shape[0]
+    nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
     xn = np.empty(n)
     every = True
     for t in range(nb):
@@ -137,7 +138,8 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
             finite = finite and np.isfinite(xn[i])
             for j in range(n):
                 finite = finite and np.isfinite(Pp[i, j, col] if usable else Pm[i, j, col])
-        nis_run[b], blown = verdict(finite, trace, q, usable, True, nis_run[b], limits)
+        nis_run[b], blown = verdict(finite, trace, q, usable, True, nis_run[b], nis_limit,
+                                    patience, max_trace)
         if blown:
             diverged[b] = True
         if finite:
@@ -257,33 +259,30 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                         scale = max(scale, abs(P[r, i, j]))
                         change = max(change, abs(U[i, j, t] - P[r, i, j]))
     shared = n_p < n_b
-    c = min(CHUNK, n_b)
-    Xm, E = np.empty((n, c)), np.empty((m, c))
-    settling, repaired = regime[1] == 1, False
-    for b0 in range(0, n_b, c):                      # the state half, a block at a time
-        nb = min(c, n_b - b0)
-        for t in range(nb):
-            b = b0 + t
-            ub = 0 if u.shape[0] == 1 else b
-            settling = settling and valid[b] and predict[b]
-            for i in range(n):
-                if predict[b]:
-                    v = 0.0
-                    for k in range(n):
-                        v += A[i, k] * x[b, k]
-                    for k in range(n_u):
-                        v += B[i, k] * u[ub, k]
-                    Xm[i, t] = v
-                else:
-                    Xm[i, t] = x[b, i]
-            for i in range(m):
+    Xm, E = np.empty((n, n_b)), np.empty((m, n_b))
+    settling = regime[1] == 1
+    # the state half: x⁻ and e of every system, then one finish call (a call per block of
+    # 64 passes 19 arguments each time: ~15 ns per system, half the converged KF's step)
+    for b in range(n_b):
+        ub = 0 if u.shape[0] == 1 else b
+        settling = settling and valid[b] and predict[b]
+        for i in range(n):
+            if predict[b]:
                 v = 0.0
                 for k in range(n):
-                    v += C[i, k] * Xm[k, t]
-                E[i, t] = y[b, i] - v
-        every = finish(b0, nb, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, b0,
-                       shared, not (shared or steady), x, P, diverged, nis_run, nis, limits)
-        repaired = repaired or not every
+                    v += A[i, k] * x[b, k]
+                for k in range(n_u):
+                    v += B[i, k] * u[ub, k]
+                Xm[i, b] = v
+            else:
+                Xm[i, b] = x[b, i]
+        for i in range(m):
+            v = 0.0
+            for k in range(n):
+                v += C[i, k] * Xm[k, b]
+            E[i, b] = y[b, i] - v
+    repaired = not finish(0, n_b, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, 0,
+                          shared, not (shared or steady), x, P, diverged, nis_run, nis, limits)
     if shared and not steady:                        # one covariance, stored where finite
         finite = ok_all[0]
         for i in range(n):

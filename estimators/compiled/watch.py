@@ -19,13 +19,14 @@ from . import jit
 
 @jit
 def verdict(finite: bool, trace: float, nis: float, usable: bool, has_nis: bool, run: int,
-            limits: np.ndarray) -> tuple[int, bool]:
+            nis_limit: float, patience: float, max_trace: float) -> tuple[int, bool]:
     """One system's booking: ``(its new NIS run, whether this step flags it)``. Its new
-    estimate is stored exactly where ``finite``."""
-    blown = not finite or trace > limits[2]
+    estimate is stored exactly where ``finite``. The limits come as numbers (an array
+    argument would cost a reference count per call)."""
+    blown = not finite or trace > max_trace
     if has_nis:
-        run = run + 1 if usable and not nis <= limits[0] else 0
-        blown = blown or run >= limits[1]
+        run = run + 1 if usable and not nis <= nis_limit else 0
+        blown = blown or run >= patience
     return run, blown
 
 
@@ -39,6 +40,7 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
     if not (P_new.shape[0] == x.shape[0] == P.shape[0] == valid.shape[0] == diverged.shape[0]
             == nis_run.shape[0] == nis.shape[0] == n_b and nis_new.shape[0] in (0, n_b)):
         raise ValueError("accept: the arrays must have a row per system")
+    nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
     for b in range(n_b):
         finite = True
         trace = 0.0
@@ -48,7 +50,8 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
             for j in range(n):
                 finite = finite and np.isfinite(P_new[b, i, j])
         q = nis_new[b] if has_nis else np.nan
-        nis_run[b], blown = verdict(finite, trace, q, valid[b], has_nis, nis_run[b], limits)
+        nis_run[b], blown = verdict(finite, trace, q, valid[b], has_nis, nis_run[b], nis_limit,
+                                    patience, max_trace)
         if blown:
             diverged[b] = True
         if finite:
