@@ -16,7 +16,12 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, po
 from ._base import PlantEnv, psd_sqrt
 from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
 from ._overlay import CameraView
-from .pendulum_slider_dynamics import FRICTION_MODES, PAPER_PARAMS, PendulumSliderDynamics
+from .pendulum_slider_dynamics import (
+    EQUATIONS,
+    FRICTION_MODES,
+    PAPER_PARAMS,
+    PendulumSliderDynamics,
+)
 
 ASSET = Path(__file__).parent / "assets" / "pendulum_slider.xml"
 PAPER_R_STD = (0.003, 0.03, 0.03, 0.3)
@@ -121,6 +126,19 @@ class PendulumSliderEnv(PlantEnv):
       inside the band ``|2k (x - l0)| < μ N`` without creeping;
     * ``"none"``.
 
+    Equations of motion (``dynamics``):
+
+    * ``"physical"`` (default) — the Lagrangian's, simulated by MuJoCo as above;
+    * ``"printed-eq15"``, ``"printed-eq5"`` — paper 003's printed eq (15) or eq (5)
+      (:mod:`fir_gym.envs.pendulum_slider_dynamics` gives their errata: the wrong
+      centripetal sign, ``m1 l²`` for ``m2 l²`` and, in eq 5, an asymmetric mass
+      matrix that creates energy). They are **unphysical** and offered only to run
+      the paper's experiment as printed. MuJoCo cannot simulate them (its mass matrix
+      is the physical one), so the plant integrates the printed ODE by the same RK4
+      (1 ms, ``frame_skip`` substeps per env step, the input held) that the filter's
+      model uses, and copies the state into MuJoCo only for rendering. They carry the
+      paper's sign-free friction term: ``friction`` must be ``"paper"``.
+
     ## Action Space
 
     | Num | Action                                  | Min | Max |
@@ -167,15 +185,15 @@ class PendulumSliderEnv(PlantEnv):
 
     ## Arguments
 
-    ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", frame_skip=1,
+    ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", dynamics="physical", frame_skip=1,
     force_max=10.0, R=diag(PAPER_R_STD²), Q=None, nominal=None, initial_state=None,
     initial_state_cov=None, render_mode=None, width=480, height=360, **params)``,
     ``params`` among ``m1, m2, l, I_c, k, l0, M0, mu, g``. ``frame_skip`` MuJoCo
     steps of 1 ms make one env step. ``Q`` is the true process noise added to the
     state after each env step (none by default: MuJoCo is deterministic); the
     model's ``Q`` defaults to paper 003's 1e-6 per state (``nominal={"Q": ...}``).
-    ``nominal`` may change any physical parameter, ``R``, ``Q`` or ``friction`` for
-    the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
+    ``nominal`` may change any physical parameter, ``R``, ``Q``, ``friction`` or
+    ``dynamics`` for the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
     parameters ``[μ, M0]`` can be estimated jointly with the state.
 
     ## Version History
@@ -199,6 +217,7 @@ class PendulumSliderEnv(PlantEnv):
         self,
         *,
         friction: str = "paper",
+        dynamics: str = "physical",
         frame_skip: int = 1,
         force_max: float = 10.0,
         R: ArrayLike | None = None,
@@ -216,6 +235,11 @@ class PendulumSliderEnv(PlantEnv):
             raise TypeError(f"unexpected keyword argument(s) {unknown}; physical parameters are "
                             f"{sorted(PAPER_PARAMS)}")
         one_of("friction", friction, FRICTION_MODES)
+        one_of("dynamics", dynamics, EQUATIONS)
+        if dynamics != "physical" and friction != "paper":
+            raise ValueError(f"dynamics={dynamics!r} (paper 003's printed equations) carries the "
+                             f"paper's own friction term; friction must be 'paper', got "
+                             f"{friction!r}")
         phys = {**PAPER_PARAMS, **{k: float(v) for k, v in physical.items()}}
         for name in ("m1", "m2", "l", "I_c", "k", "g"):
             positive(name, phys[name])
@@ -225,6 +249,7 @@ class PendulumSliderEnv(PlantEnv):
         params: dict[str, Any] = {
             **phys,
             "friction": friction,
+            "dynamics": dynamics,
             "frame_skip": positive("frame_skip", frame_skip, integer=True),
             "force_max": positive("force_max", force_max),
             "R": as_covariance("R", np.square(PAPER_R_STD) if R is None else R, 4, definite=True),
@@ -246,6 +271,9 @@ class PendulumSliderEnv(PlantEnv):
             positive("height", height, integer=True)
         self._process_sqrt = psd_sqrt(self.params["Q"])
         self._has_process_noise = bool(np.any(self.params["Q"]))
+        #: the printed ODE the plant integrates in place of MuJoCo (None: MuJoCo)
+        self._printed = (None if dynamics == "physical"
+                         else self._make_dynamics(self.params))
         self._build_simulation()
 
     # ------------------------------------------------------------------ simulation
@@ -333,6 +361,8 @@ class PendulumSliderEnv(PlantEnv):
         if x.ndim != 1:
             raise ValueError("PendulumSlider-v0 simulates one system; it has no batched path")
         force = float(a[0]) * self.params["force_max"]
+        if self._printed is not None:
+            return self._printed_transition(x, a, force, rng)
         d = self.mj_data
         self._ctrl_view[0] = force
         if self._stage_rk4 is None:
@@ -349,6 +379,18 @@ class PendulumSliderEnv(PlantEnv):
             x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
             self._write_state(x_next)
             d.ctrl[0] = force
+        return x_next, {"force": force}
+
+    def _printed_transition(self, x: FloatArray, a: FloatArray, force: float,
+                            rng: np.random.Generator) -> tuple[FloatArray, dict[str, Any]]:
+        """One env step of the printed ODE (RK4); MuJoCo only mirrors the state for drawing."""
+        dyn = self._printed
+        assert dyn is not None
+        x_next = dyn.propagate(x, np.asarray(a, dtype=np.float64), dyn.theta)[0]
+        if self._has_process_noise:
+            x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
+        if np.isfinite(x_next).all():      # a failed step is the base class's to report
+            self._write_state(x_next)
         return x_next, {"force": force}
 
     def _restore(self, x: FloatArray) -> None:
@@ -376,7 +418,8 @@ class PendulumSliderEnv(PlantEnv):
         skip = params["frame_skip"]
         return PendulumSliderDynamics(**{key: params[key] for key in PAPER_PARAMS},
                                       dt=1e-3 * skip, substeps=skip, friction=params["friction"],
-                                      input_scale=params["force_max"])
+                                      input_scale=params["force_max"],
+                                      equations=params["dynamics"])
 
     @property
     def dynamics(self) -> PendulumSliderDynamics:
@@ -384,8 +427,9 @@ class PendulumSliderEnv(PlantEnv):
         return self._make_dynamics(self.nominal_params)
 
     def _build_model(self, params: Mapping[str, Any]) -> Any:
-        return self._make_dynamics(params).model(Q=params["Q"], R=params["R"],
-                                                 name=f"PendulumSlider({params['friction']})")
+        name = (f"PendulumSlider({params['friction']})" if params["dynamics"] == "physical"
+                else f"PendulumSlider({params['dynamics']})")
+        return self._make_dynamics(params).model(Q=params["Q"], R=params["R"], name=name)
 
     # ------------------------------------------------------------------ rendering, pickling
     def render(self) -> NDArray[np.uint8] | None:

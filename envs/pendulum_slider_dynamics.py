@@ -25,6 +25,26 @@ The ``μ`` terms are ``s μ N`` with the rail's normal force
   resolved and the Jacobian ignores the jump);
 * ``"none"`` — ``s = 0``.
 
+**Printed equations** (``equations``; docs/papers.md#003-printed-equations and
+docs/papers.md#003-eq-15). Paper 003 prints two other versions of these equations, both
+unphysical, offered to run its experiment as printed:
+
+* ``"printed-eq15"`` — eq (15), the state-space form the paper's UKF uses: the
+  coupling ``−m2 l (cosθ − μ sinθ)`` is the Lagrangian's, but the centripetal term
+  has the opposite sign (``+m2 l sinθ θ̇²`` on the right-hand side) and the hinge
+  inertia is ``I_c + m1 l²`` (``m1`` where the Lagrangian gives ``m2``);
+* ``"printed-eq5"`` — eq (5): as eq (15), and the slider's row couples through
+  ``+m2 l (cosθ + μ sinθ) θ̈`` while the pendulum's row has ``−m2 l cosθ ẍ``: the
+  mass matrix is not symmetric, so the model creates energy.
+
+With ``σ_c`` the sign of the centripetal term on the right-hand side, ``σ_x`` that
+of ``m2 l cosθ`` in the slider row's coupling and ``J`` the hinge inertia, all three
+are ``M12 = σ_x m2 l cosθ + s μ m2 l sinθ``, ``M22 = J`` and
+``b1 = U − 2k (x − l0) + σ_c m2 l sinθ θ̇² − s μ ((m1+m2) g + m2 l cosθ θ̇²)``:
+physical ``(σ_c, σ_x, J) = (−1, −1, I_c + m2 l²)``, eq 15 ``(+1, −1, I_c + m1 l²)``,
+eq 5 ``(+1, +1, I_c + m1 l²)``. The printed equations carry the paper's sign-free
+friction term (``friction="paper"`` only).
+
 One step integrates the ODE over ``dt`` with ``substeps`` classical RK4 steps,
 the input held. The Jacobians are those of the RK4 map itself (stage-wise
 sensitivity propagation of the analytic ODE Jacobian), exact to round-off.
@@ -48,6 +68,11 @@ from ._interval_kernels import slider_rk4
 PAPER_PARAMS: dict[str, float] = {"m1": 0.654, "m2": 0.7925, "l": 0.2, "I_c": 0.0014, "k": 100.0,
                                   "l0": 0.025, "M0": 0.2, "mu": 0.2, "g": 9.8}
 FRICTION_MODES = ("paper", "coulomb", "none")
+#: the equations of motion: the Lagrangian's, and paper 003's printed eqs (15) and (5)
+EQUATIONS = ("physical", "printed-eq15", "printed-eq5")
+#: (σ_c, σ_x, hinge inertia uses m1) of each (module docstring)
+_EQUATION_SIGNS = {"physical": (-1.0, -1.0, False), "printed-eq15": (1.0, -1.0, True),
+                   "printed-eq5": (1.0, 1.0, True)}
 
 
 class PendulumSliderDynamics:
@@ -60,6 +85,8 @@ class PendulumSliderDynamics:
         m1, m2, l, I_c, k, l0, M0, mu, g: physical parameters (defaults: paper 003, Table 3).
         dt: step length (s); substeps: RK4 steps per step.
         friction: ``"paper"``, ``"coulomb"`` or ``"none"`` (module docstring).
+        equations: ``"physical"`` (default) or paper 003's printed ``"printed-eq15"`` /
+            ``"printed-eq5"`` (unphysical; module docstring; numpy path only).
         coulomb_velocity: smoothing velocity of the Coulomb mode (0 for exact sign).
         input_scale: newtons per unit of input (the env's action scaling).
     """
@@ -70,7 +97,7 @@ class PendulumSliderDynamics:
                  I_c: float = 0.0014, k: float = 100.0, l0: float = 0.025, M0: float = 0.2,
                  mu: float = 0.2, g: float = 9.8, dt: float = 1e-3, substeps: int = 1,
                  friction: str = "paper", coulomb_velocity: float = 0.01,
-                 input_scale: float = 1.0) -> None:
+                 input_scale: float = 1.0, equations: str = "physical") -> None:
         for name, val in (("m1", m1), ("m2", m2), ("l", l), ("k", k), ("g", g)):
             positive(name, val)
         for name, val in (("I_c", I_c), ("M0", M0), ("mu", mu), ("l0", l0),
@@ -78,6 +105,13 @@ class PendulumSliderDynamics:
             if not np.isfinite(val) or (name != "l0" and val < 0):
                 raise ValueError(f"{name} must be a finite non-negative number; got {val!r}")
         one_of("friction", friction, FRICTION_MODES)
+        self.equations = one_of("equations", equations, EQUATIONS)
+        if equations != "physical" and friction != "paper":
+            raise ValueError(f"equations={equations!r} carries paper 003's own friction term; "
+                             f"friction must be 'paper', got {friction!r}")
+        self._centripetal, self._coupling, m1_inertia = _EQUATION_SIGNS[equations]
+        #: ``J``, the pendulum's inertia about the hinge in these equations
+        self.hinge_inertia = I_c + (m1 if m1_inertia else m2) * l * l
         self.m1, self.m2, self.l, self.I_c, self.k, self.l0 = m1, m2, l, I_c, k, l0
         self.M0, self.mu, self.g = M0, mu, g
         self.dt = positive("dt", dt)
@@ -117,11 +151,13 @@ class PendulumSliderDynamics:
         c, sn = np.cos(th), np.sin(th)
         s, ds = self._friction_sign(xd)
         mt, m2l = m1 + m2, m2 * l
+        sc, sx = self._centripetal, self._coupling
         N0 = mt * g + m2l * c * w * w                  # normal force without the θ̈ part
-        M11, M22 = mt, self.I_c + m2l * l
-        M12 = -m2l * c + s * mu * m2l * sn
+        M11 = mt
+        M22 = self.I_c + m2l * l if self.equations == "physical" else self.hinge_inertia
+        M12 = sx * m2l * c + s * mu * m2l * sn
         M21 = -m2l * c
-        b1 = U - 2.0 * k * (z[..., 0] - self.l0) - m2l * sn * w * w - s * mu * N0
+        b1 = U - 2.0 * k * (z[..., 0] - self.l0) + sc * m2l * sn * w * w - s * mu * N0
         b2 = -M0 * w - m2l * g * sn
         det = M11 * M22 - M12 * M21
         xdd = (M22 * b1 - M12 * b2) / det
@@ -133,8 +169,9 @@ class PendulumSliderDynamics:
         # columns: x, ẋ, θ, θ̇, μ, M0 — (∂b1/∂v − ∂M12/∂v θ̈, ∂b2/∂v − ∂M21/∂v ẍ)
         r1 = [zero - 2.0 * k,
               -mu * ds * N0 - mu * ds * m2l * sn * thdd,
-              -m2l * c * w * w + s * mu * m2l * sn * w * w - (m2l * sn + s * mu * m2l * c) * thdd,
-              -2.0 * m2l * w * (sn + s * mu * c),
+              sc * m2l * c * w * w + s * mu * m2l * sn * w * w
+              + (sx * m2l * sn - s * mu * m2l * c) * thdd,
+              2.0 * m2l * w * (sc * sn - s * mu * c),
               -s * N0 - s * m2l * sn * thdd,
               zero]
         r2 = [zero, zero, -m2l * g * c - m2l * sn * xdd, zero - M0, zero, -w]
@@ -153,9 +190,10 @@ class PendulumSliderDynamics:
         """One step of RK4 (``substeps`` times); with ``jacobian``, ``∂/∂x`` and ``∂/∂[μ, M0]``.
 
         With numba the same loop runs compiled, system by system
-        (:func:`~._interval_kernels.slider_rk4`; equal to round-off, tested).
+        (:func:`~._interval_kernels.slider_rk4`; equal to round-off, tested) — for the
+        physical equations; the printed ones run this numpy loop.
         """
-        if compiled.ENABLED:
+        if self.equations == "physical" and compiled.ENABLED:
             return self._propagate_compiled(x, u, theta, jacobian)
         U = self.input_scale * u[..., 0]
         theta = np.broadcast_to(theta, x.shape[:-1] + (2,))
@@ -231,7 +269,11 @@ class PendulumSliderDynamics:
         return np.broadcast_to(np.eye(4), lead + (4, 4)), np.zeros(lead + (4, 2))
 
     def energy(self, x: ArrayLike) -> FloatArray:
-        """Mechanical energy (kinetic + gravity + spring) of states ``(…, 4)``, in joules."""
+        """Mechanical energy (kinetic + gravity + spring) of states ``(…, 4)``, in joules.
+
+        The Lagrangian's (physical) energy, whatever :attr:`equations`: the printed
+        equations do not conserve it (eq 5 creates energy).
+        """
         x = np.asarray(x, dtype=np.float64)
         xd, th, w = x[..., 1], x[..., 2], x[..., 3]
         m2l = self.m2 * self.l
@@ -247,6 +289,9 @@ class PendulumSliderDynamics:
 
             μ · N_k  = U_k − 2k (x − l0) − m2 l sinθ θ̇² − (m1+m2) ẍ + m2 l cosθ θ̈
             M0 · θ̇_k = −m2 g l sinθ − (I_c + m2 l²) θ̈ + m2 l cosθ ẍ
+
+        (the printed equations change the signs ``σ_c``, ``σ_x`` and the inertia ``J`` of
+        the module docstring: ``+ σ_c m2 l sinθ θ̇² − σ_x m2 l cosθ θ̈`` and ``− J θ̈``)
 
         with the normal force ``N = (m1+m2) g + m2 l (cosθ θ̇² + sinθ θ̈)``, so each
         parameter is one scalar regression, ``Σ φ r / Σ φ²``. The states are the
@@ -297,9 +342,11 @@ class PendulumSliderDynamics:
         m1, m2, l, g = self.m1, self.m2, self.l, self.g
         m2l, sn, c = m2 * l, np.sin(th), np.cos(th)
         normal = (m1 + m2) * g + m2l * (c * w * w + sn * thdd)
-        r1 = force - 2.0 * self.k * (x - self.l0) - m2l * sn * w * w - (m1 + m2) * xdd \
-            + m2l * c * thdd
-        r2 = -m2l * g * sn - (self.I_c + m2l * l) * thdd + m2l * c * xdd
+        sc, sx = self._centripetal, self._coupling
+        J = self.I_c + m2l * l if self.equations == "physical" else self.hinge_inertia
+        r1 = force - 2.0 * self.k * (x - self.l0) + sc * m2l * sn * w * w - (m1 + m2) * xdd \
+            - sx * m2l * c * thdd
+        r2 = -m2l * g * sn - J * thdd + m2l * c * xdd
         return {"mu": float(normal @ r1 / (normal @ normal)), "M0": float(w @ r2 / (w @ w))}
 
     def model(self, Q: ArrayLike = 1e-6, R: ArrayLike = (0.003**2, 0.03**2, 0.03**2, 0.3**2),
@@ -313,5 +360,7 @@ class PendulumSliderDynamics:
         return ParametricModel(f=self.f_theta, h=self.h_theta,
                                params={"mu": self.mu, "M0": self.M0}, Q=Q_, R=R, dt=self.dt,
                                jac_f=self.jac_f, jac_h=self.jac_h, n_u=1,
-                               name=name or f"PendulumSlider({self.friction})",
+                               name=name or (f"PendulumSlider({self.friction})"
+                                             if self.equations == "physical" else
+                                             f"PendulumSlider({self.equations})"),
                                f_jac_f=self.f_jac_f)

@@ -25,6 +25,16 @@ exact difference, not a bound. The step 3.9 → 3.10 misapplies Lemma 1 (eq 1.5)
 which gives the valid ``|tr(Φ Y Φᵀ)| ≤ ‖ΦᵀΦ‖_F ‖Y‖_F``. :func:`delta_pi1` returns
 the paper's reading, that Lemma-1 bound and the exact trace.
 
+**Which transition Φ_F** (docs/papers.md#001-eq-3-3-transition). Eq 3.7 (the
+solution of 3.6) and the bound built on it use ``Φ_F(T, τ)``, from ``τ`` to the
+window's end. Eqs 3.2–3.4 as printed write
+``Φ_F(t, τ)`` but define it by ``d/dt Φ_F(t, τ) = [A_M − K_M(t, σ) C_M] Φ_F(t, τ)``,
+mixing the time ``t`` with the window time ``σ``; integrated in ``σ`` from the window
+start it is ``Φ_F(τ, 0)``, the transition from ``σ = 0`` to ``τ``.
+:func:`delta_pi1_from_start` evaluates eq 3.2 under that reading (it is no bound
+of ``tr(R_r − R)``; for the steady-state filter both readings are ``e^{F τ}`` and
+coincide).
+
 **Δπ₂** (Theorem 4.1, eqs 4.2–4.19): reconstructed in :func:`delta_pi2`.
 :func:`worst_case` evaluates the exact ``tr(R_r − R)`` on the corners of an
 uncertainty box.
@@ -43,6 +53,7 @@ from scipy.integrate import simpson
 from ._validation import FloatArray, positive
 from .continuous import ContinuousModel
 from .continuous_fir import (
+    FIRSolution,
     fir_riccati,
     grid_steps,
     kalman_bucy,
@@ -51,7 +62,8 @@ from .continuous_fir import (
 )
 
 __all__ = ["ErrorCovariance", "ModelBound", "NoiseBound", "Theorem21", "WorstCase",
-           "corners", "delta_pi1", "delta_pi2", "error_covariance", "theorem21", "worst_case"]
+           "corners", "delta_pi1", "delta_pi1_from_start", "delta_pi2", "error_covariance",
+           "theorem21", "worst_case"]
 
 
 class NoiseBound(NamedTuple):
@@ -112,12 +124,19 @@ def error_covariance(true: ContinuousModel, nominal: ContinuousModel,
         S = scipy.linalg.solve_continuous_lyapunov(Aa, -Wa)
         return ErrorCovariance(J @ S @ J.T, kalman_bucy(true))
     N = grid_steps(horizon, n_steps)
-    fine = fir_riccati(nominal, horizon, 2 * N)
+    K_M = fir_riccati(nominal, horizon, 2 * N).K                 # on the RK4 stage grid
+    m = len(K_M)
+    Aa = np.zeros((m, 2 * n, 2 * n))
+    Aa[:, :n, :n] = A
+    Aa[:, n:, :n] = K_M @ C
+    Aa[:, n:, n:] = A_M - K_M @ C_M
+    Wa = np.zeros((m, 2 * n, 2 * n))
+    Wa[:, :n, :n] = W
+    Wa[:, n:, n:] = K_M @ V @ np.swapaxes(K_M, 1, 2)
 
     def rhs(k: int, S: FloatArray) -> FloatArray:
-        Aa, Wa = joint(fine.K[k])
-        AS = Aa @ S
-        return AS + AS.T + Wa
+        AS = Aa[k] @ S
+        return AS + AS.T + Wa[k]
 
     S0 = scipy.linalg.block_diag(stationary_covariance(true), np.zeros((n, n)))
     S = _rk4(rhs, S0, horizon / N, N)[-1]
@@ -184,6 +203,21 @@ def delta_pi1(true: ContinuousModel, nominal: ContinuousModel, horizon: float | 
     return NoiseBound(*(float(simpson(f, x=w.s)) for f in (paper, lemma1, trace)))
 
 
+def delta_pi1_from_start(true: ContinuousModel, nominal: ContinuousModel,
+                         horizon: float | None, n_steps: int | None = None) -> float:
+    """Eq 3.2 with ``Φ_F = Φ_F(τ, 0)``, the transition from the window start (module docstring).
+
+        ∫_0^T ‖Φ_F(τ, 0) ΔK(τ) ΔK(τ)ᵀ Φ_F(τ, 0)ᵀ‖_F dτ
+
+    A reading of the printed eqs 3.2–3.4, not a bound; ``horizon=None`` (steady state)
+    gives the same value as :func:`delta_pi1`'s ``paper``.
+    """
+    w = _Window(true, nominal, horizon, n_steps)
+    Phi = w.Phi if w.fir is None else w.fir.from_start()
+    X = Phi @ (w.K_M - w.K)
+    return float(simpson(np.linalg.norm(X @ np.swapaxes(X, 1, 2), axis=(1, 2)), x=w.s))
+
+
 def delta_pi2(true: ContinuousModel, nominal: ContinuousModel, horizon: float | None,
               n_steps: int | None = None) -> ModelBound:
     """Theorem 4.1 (``ΔQ = ΔV = 0``), reconstructed: an upper bound of ``tr(R_r − R)``.
@@ -222,7 +256,7 @@ def delta_pi2(true: ContinuousModel, nominal: ContinuousModel, horizon: float | 
     """
     A, C, _, _ = linear_matrices(true)
     A_M, C_M, _, _ = linear_matrices(nominal)
-    nA, nC = np.linalg.norm(A_M - A), np.linalg.norm(C_M - C)
+    nA, nC = float(np.linalg.norm(A_M - A)), float(np.linalg.norm(C_M - C))
     w = _Window(true, nominal, horizon, n_steps)
     dK = w.K_M - w.K
     X = w.Phi @ dK
@@ -285,6 +319,9 @@ def worst_case(build: Callable[[Mapping[str, float]], tuple[ContinuousModel, Con
 def _fir_T_bound(w: _Window, A_M: FloatArray, C: FloatArray, dK: FloatArray, nA: float,
                  nC: float, beta: float) -> tuple[float, float]:
     """α₂ and γ_T of step 3 in :func:`delta_pi2` over a finite window (2-D kernels)."""
+    if w.fir is None:
+        raise ValueError("_fir_T_bound needs a finite horizon")
+    fir = w.fir
     N, n = len(w.s) - 1, A_M.shape[0]
     _, E_M = _exp_grid(A_M, w.s[-1], N)              # e^{A_M (σ_i − σ_j)} = E_M[i − j]
     nE_M = np.linalg.norm(E_M, axis=(1, 2))
@@ -294,43 +331,56 @@ def _fir_T_bound(w: _Window, A_M: FloatArray, C: FloatArray, dK: FloatArray, nA:
     alpha2, gain_T = 0.0, 0.0
     for i in range(N + 1):
         if i:
-            rows = np.concatenate([w.fir.step[i - 1] @ rows, np.eye(n)[None]])
+            rows = np.concatenate([fir.step[i - 1] @ rows, np.eye(n)[None]])
         lags = i - np.arange(i + 1)
         nPhi = np.linalg.norm(rows, axis=(1, 2)) * nE_M[lags]
         T_M = _trapz(rows @ Y[: i + 1] @ np.swapaxes(E_M[lags], 1, 2), w.s[: i + 1])
-        g2 = _trapz(nPhi * (nA + nKM[: i + 1] * nC), w.s[: i + 1])
+        g2 = float(_trapz(nPhi * (nA + nKM[: i + 1] * nC), w.s[: i + 1]))
         alpha2 = max(alpha2, float(np.linalg.norm(T_M)) + beta * g2)
-        gain_T = max(gain_T, nA * _trapz(nPhi, w.s[: i + 1]))
+        gain_T = max(gain_T, nA * float(_trapz(nPhi, w.s[: i + 1])))
     return alpha2, gain_T
 
 
 class _Window:
     """Grid quantities of the nominal filter and the true optimal one.
 
-    FIR (finite ``horizon``): window grid ``s = σ``, ``Phi[j] = Φ_F(T, σ_j)``.
-    Kalman (``horizon=None``): lag grid ``s ∈ [0, tail]``, ``Phi[j] = e^{F_M s_j}``,
-    constant gains; ``tail`` covers the decay of ``e^{F_M s}`` and ``e^{A_M s}``.
+    FIR (finite ``horizon``): window grid ``s = σ``, ``Phi[j] = Φ_F(T, σ_j)``, and the
+    nominal filter's solution ``fir``. Kalman (``horizon=None``): lag grid
+    ``s ∈ [0, tail]``, ``Phi[j] = e^{F_M s_j}``, constant gains, ``fir = None``; ``tail``
+    covers the decay of ``e^{F_M s}`` and ``e^{A_M s}``.
     """
+
+    s: FloatArray
+    Phi: FloatArray
+    K: FloatArray
+    K_M: FloatArray
+    R: FloatArray
+    tail: float
+    fir: FIRSolution | None
 
     def __init__(self, true: ContinuousModel, nominal: ContinuousModel,
                  horizon: float | None, n_steps: int | None) -> None:
+        _, C, _, V = linear_matrices(true)
+        A_M, C_M, _, V_M = linear_matrices(nominal)
         if horizon is None:
             P, P_M = kalman_bucy(true), kalman_bucy(nominal)
-            K = P @ np.linalg.solve(true.R, true.C).T
-            K_M = P_M @ np.linalg.solve(nominal.R, nominal.C).T
-            F = nominal.A - K_M @ nominal.C
-            self.tail = _tail(nominal.A, F)
+            K = P @ np.linalg.solve(V, C).T
+            K_M = P_M @ np.linalg.solve(V_M, C_M).T
+            F = A_M - K_M @ C_M
+            self.tail = _tail(A_M, F)
             self.s, self.Phi = _exp_grid(F, self.tail)
             m = len(self.s)
             self.K = np.broadcast_to(K, (m, *K.shape))
             self.K_M = np.broadcast_to(K_M, (m, *K.shape))
             self.R = np.broadcast_to(P, (m, *P.shape))
+            self.fir = None
         else:
             N = grid_steps(positive("horizon", horizon), n_steps)
-            tru, self.fir = fir_riccati(true, horizon, N), fir_riccati(nominal, horizon, N)
+            tru, fir = fir_riccati(true, horizon, N), fir_riccati(nominal, horizon, N)
             self.s, self.Phi, self.K, self.K_M, self.R = (
-                tru.sigma, self.fir.to_end(), tru.K, self.fir.K, tru.R)
-            self.tail = _tail(nominal.A, nominal.A)
+                tru.sigma, fir.to_end(), tru.K, fir.K, tru.R)
+            self.tail = _tail(A_M, A_M)
+            self.fir = fir
 
 
 def _tail(A_M: FloatArray, F: FloatArray) -> float:
@@ -358,8 +408,9 @@ def _exp_grid(F: FloatArray, length: float, n: int | None = None) -> tuple[Float
 
 
 def _trapz(f: FloatArray, x: FloatArray) -> FloatArray:
+    """The trapezoid rule over the leading axis (a 0-d array for scalar samples)."""
     if len(x) < 2:
-        return np.zeros_like(f[0]) if np.ndim(f) > 1 else 0.0
+        return np.zeros_like(f[0])
     d = np.diff(x)
     return np.tensordot(d, 0.5 * (f[1:] + f[:-1]), axes=(0, 0))
 

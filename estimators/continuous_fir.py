@@ -56,6 +56,15 @@ class FIRSolution(NamedTuple):
             out[j] = out[j + 1] @ self.step[j]
         return out
 
+    def from_start(self) -> FloatArray:
+        """``Φ_F(σ_j, 0)`` for every grid point, ``(N+1, n, n)``: the transition from the window
+        start (the reading of paper 001's eqs 3.2–3.4 that integrates eq 3.3 from ``σ = 0``)."""
+        out = np.empty((len(self.sigma),) + self.step.shape[1:])
+        out[0] = np.eye(self.step.shape[1])
+        for j in range(len(self.step)):
+            out[j + 1] = self.step[j] @ out[j]
+        return out
+
     def impulse_response(self) -> FloatArray:
         """``H(σ_j) = Φ_F(T, σ_j) K(σ_j)`` (eq 2.4): ``x̂ = ∫_0^T H(σ) z(t − T + σ) dσ``."""
         return self.to_end() @ self.K

@@ -24,6 +24,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from . import __version__
 from .tables import format_table
@@ -40,7 +41,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
     rows = []
     for env_id in ENV_IDS:
-        plant = gym.make(env_id).unwrapped
+        plant: Any = gym.make(env_id).unwrapped
         rows.append([env_id, gym.spec(env_id).max_episode_steps, ", ".join(plant.state_names),
                      ", ".join(plant.measurement_names), ", ".join(plant.action_names)])
     print(format_table(["environment", "max steps", "state", "measurement", "action"], rows))
@@ -61,29 +62,31 @@ def _papers(text: str) -> list[str]:
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from .scenarios import SCENARIOS, episodes
-    from .scenarios.report import write_report
+    from .scenarios.plan import execute
+    from .scenarios.report import vocabulary, write_report
     from .scenarios.runner import Runner
 
     out = Path(args.out) if args.out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
-    summaries = episodes.run_all(seed=args.seed)
-    headers, rows = episodes.summary_rows(summaries)
-    print(f"Scripted episodes (one per environment, seed {args.seed})\n")
-    print(format_table(headers, rows, markdown=args.markdown))
     papers = [p for group in (args.paper or []) for p in group]
     wanted = [name for name in SCENARIOS
               if not papers or name.removeprefix("paper") in papers]
-    reports = []
+    modules = [importlib.import_module(f"fir_gym.scenarios.{name}") for name in wanted]
+    plans = [episodes.plan(seed=args.seed)] + [
+        m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
+    # every scenario's tasks in one map per stage: the workers stay busy across scenarios
     with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
                 progress=not args.no_progress) as runner:
-        for name in wanted:
-            module = importlib.import_module(f"fir_gym.scenarios.{name}")
-            report = module.run(seed=args.seed, quick=args.quick, runs=args.runs, runner=runner)
-            if out and hasattr(module, "plot"):
-                module.plot(report, out)
-            reports.append(report)
-            print("\n" + report.to_text(markdown=args.markdown))
+        summaries, *reports = execute(plans, runner, desc="reproduce")
+    headers, rows = episodes.summary_rows(summaries)
+    print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
+    print(f"Scripted episodes (one per environment, seed {args.seed})\n")
+    print(format_table(headers, rows, markdown=args.markdown))
+    for module, report in zip(modules, reports, strict=True):
+        if out and hasattr(module, "plot"):
+            module.plot(report, out)
+        print("\n" + report.to_text(markdown=args.markdown))
     if out:
         path = write_report(out, reports, episodes_table=(headers, rows))
         print(f"\nwrote {path}")

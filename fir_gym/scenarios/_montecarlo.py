@@ -70,7 +70,7 @@ def simulate_episode(task: EpisodeTask) -> tuple[np.ndarray, np.ndarray, np.ndar
     env = gym.make(task.env_id, max_episode_steps=task.steps + 1, **dict(task.env_kwargs))
     options = None if task.reset_state is None else {"state": list(task.reset_state)}
     y, info = env.reset(seed=task.seed, options=options)
-    n_u = env.action_space.shape[0]
+    n_u = _width(env.action_space)
     X = np.full((task.steps + 1, info["state"].size), np.nan)
     Y = np.full((task.steps + 1, y.size), np.nan)
     U = np.zeros((task.steps, n_u))
@@ -102,7 +102,7 @@ def simulate_vector(task: VectorTask) -> tuple[np.ndarray, np.ndarray, np.ndarra
     env = gym.make_vec(task.env_id, num_envs=task.n, vectorization_mode="vector_entry_point",
                        max_episode_steps=task.steps + 1, **dict(task.env_kwargs))
     y, info = env.reset(seed=task.seed)
-    n_u = env.single_action_space.shape[0]
+    n_u = _width(env.single_action_space)
     X = np.full((task.steps + 1, task.n, info["state"].shape[1]), np.nan)
     Y = np.full((task.steps + 1, task.n, y.shape[1]), np.nan)
     U = np.zeros((task.steps, task.n, n_u))
@@ -116,6 +116,11 @@ def simulate_vector(task: VectorTask) -> tuple[np.ndarray, np.ndarray, np.ndarra
         alive &= ~terminated
     env.close()
     return X, Y, U
+
+
+def _width(space: Any) -> int:
+    """The size of a ``Box`` action space (the plants' spaces are one-dimensional boxes)."""
+    return int(space.shape[0])
 
 
 def stack_episodes(results: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> Episodes:

@@ -15,6 +15,8 @@ import gymnasium as gym
 import numpy as np
 
 from .._registration import ENV_IDS
+from .plan import Stage, Task, run_plan
+from .runner import Runner
 
 #: The scripted input of each plant (a function of the step index), and why.
 SCRIPTS: dict[str, tuple[str, Any]] = {
@@ -45,12 +47,13 @@ def run_episode(env_id: str, seed: int = 0) -> EpisodeSummary:
     """Run one scripted episode of ``env_id`` and summarise it."""
     description, script = SCRIPTS.get(env_id, ("zero input", lambda k: 0.0))
     env = gym.make(env_id)
-    plant = env.unwrapped
+    plant: Any = env.unwrapped
+    shape = tuple(env.action_space.shape or ())
     obs, info = env.reset(seed=seed)
     states, residuals, ret = [info["state"]], [], 0.0
     k, terminated, truncated = 0, False, False
     while not (terminated or truncated):
-        action = np.full(env.action_space.shape, script(k), dtype=np.float32)
+        action = np.full(shape, script(k), dtype=np.float32)
         obs, reward, terminated, truncated, info = env.step(action)
         states.append(info["state"])
         noise_free = info.get("x1_average", plant.model.h(info["state"])[0])
@@ -68,9 +71,20 @@ def run_episode(env_id: str, seed: int = 0) -> EpisodeSummary:
     )
 
 
-def run_all(seed: int = 0) -> list[EpisodeSummary]:
+def episode_task(task: tuple[str, int]) -> EpisodeSummary:
+    """:func:`run_episode` as a runner task: ``(env_id, seed)``."""
+    return run_episode(*task)
+
+
+def plan(seed: int = 0) -> Stage:
+    """One task per registered plant; the value is the list of summaries."""
+    return Stage([Task(episode_task, (env_id, seed), cost=0.3) for env_id in ENV_IDS],
+                 lambda out: out, desc="scripted episodes")
+
+
+def run_all(seed: int = 0, runner: Runner | None = None) -> list[EpisodeSummary]:
     """One scripted episode for every registered plant."""
-    return [run_episode(env_id, seed) for env_id in ENV_IDS]
+    return list(run_plan(plan(seed), runner))
 
 
 def summary_rows(summaries: list[EpisodeSummary]) -> tuple[list[str], list[list[Any]]]:

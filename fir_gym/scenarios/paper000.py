@@ -3,80 +3,96 @@
 * Simulation 1 (Fig. 1) — rectilinear orbit determination, EKF vs EFIR under a wrong
   gravitational parameter: :mod:`.paper000_orbit`.
 * Simulation 2 (Fig. 2, Table 1) — the oscillator with a temporary uncertainty,
-  EFIR vs LKF/EKF/UKF under both readings of eq (29): :mod:`.paper000_oscillator`.
+  EFIR vs LKF/EKF/UKF under every reading: :mod:`.paper000_oscillator` (the
+  experiment) and :mod:`.paper000_oscillator_report` (its summary and claims).
 
 ``plot`` draws Fig. 1 (x₁ error, RMSE and NEES over the long horizon) and Fig. 2
-(x₁ RMSE of every filter around the uncertainty window, both readings).
+(x₁ RMSE of every filter around the uncertainty window, under the two readings of eq 29).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .paper000_orbit import HORIZON, PAPER_FILTER, run_orbit
-from .paper000_oscillator import WINDOW, run_oscillator
+from . import paper000_orbit as orbit
+from . import paper000_oscillator as osc
+from . import paper000_oscillator_report as osc_report
+from .plan import Stage, gather, run_plan
 from .report import Report
 from .runner import Runner
 
 
+def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Any:
+    """Both simulations side by side; ``runs`` sets both Monte Carlo sizes (default 30 and
+    100; quick 5 and 20)."""
+    keys, tasks = osc.tasks(seed, quick, runs)
+    sim2 = Stage(tasks, lambda results: osc.collect(keys, results, quick=quick, runs=runs),
+                 desc="paper 000")
+
+    def assemble(values: list[Any]) -> Report:
+        report = Report("000", "Extended FIR filter for discrete nonlinear systems (EFIRF)")
+        report.figures["orbit"], report.figures["oscillator"] = values
+        orbit.fill(report, values[0])
+        osc_report.fill(report, values[1])
+        return report
+
+    return gather([orbit.plan(seed, quick, runs), sim2], assemble, desc="paper 000")
+
+
 def run(seed: int = 0, quick: bool = False, runs: int | None = None,
         runner: Runner | None = None) -> Report:
-    """Both simulations; ``runs`` sets both Monte Carlo sizes (default 30 and 100; quick 5, 20)."""
-    report = Report("000", "Extended FIR filter for discrete nonlinear systems (EFIRF)")
-    report.figures["orbit"] = run_orbit(report, seed=seed, quick=quick, runs=runs, runner=runner)
-    report.figures["oscillator"] = run_oscillator(report, seed=seed, quick=quick, runs=runs,
-                                                  runner=runner)
-    return report
+    """Both simulations (:func:`plan` on ``runner``)."""
+    return run_plan(plan(seed, quick, runs), runner)
 
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """Fig. 1 and Fig. 2 of paper 000 as PNGs under ``out_dir``."""
     from ._plotting import new_figure, save
 
-    orbit = report.figures["orbit"]
-    K = orbit["steps"]
+    o = report.figures["orbit"]
+    K = o["steps"]
     k = np.arange(K + 1)
+    N = orbit.HORIZON
     fig, ax = new_figure(3, 1, height=2.6, sharex=True)
-    colours = {"EKF": "C3", PAPER_FILTER: "C0", "EFIR filter form": "C2",
+    colours = {"EKF": "C3", orbit.PAPER_FILTER: "C0", "EFIR filter form": "C2",
                "EFIR re-anchored nominal": "C1"}
-    for name, lw in ((PAPER_FILTER, 0.5), ("EKF", 1.2)):          # the EKF on top
-        ax[0].plot(k, orbit["filters"][name]["e1_run0"], lw=lw, color=colours[name], label=name)
-    sv = orbit["sigma_v"]
+    for name, lw in ((orbit.PAPER_FILTER, 0.5), ("EKF", 1.2)):          # the EKF on top
+        ax[0].plot(k, o["filters"][name]["e1_run0"], lw=lw, color=colours[name], label=name)
+    sv = o["sigma_v"]
     ax[0].axhline(sv, color="k", ls=":", lw=0.8, label="±σ_v (measurement noise)")
     ax[0].axhline(-sv, color="k", ls=":", lw=0.8)
     ax[0].set_ylabel("x₁ error, run 0")
-    order = ["EFIR re-anchored nominal", "EFIR filter form", PAPER_FILTER, "EKF"]
-    for name in order:                       # the re-anchored variant equals the paper's EFIR
-        r, ls = orbit["filters"][name], ":" if "re-anchored" in name else "-"
-        ax[1].semilogy(k[HORIZON:], r["rmse1"][HORIZON:], ls, lw=0.7, color=colours[name],
-                       label=name)
-        ax[2].semilogy(k[HORIZON:], r["nees"][HORIZON:], ls, lw=0.7, color=colours[name],
-                       label=name)
-    ax[1].semilogy(k[HORIZON:], orbit["filters"]["EKF"]["sd1"][HORIZON:], "--", lw=0.8,
-                   color="C3", label="EKF's own σ(x₁)")
-    ax[1].set_ylabel(f"x₁ RMSE ({orbit['runs']} runs)")
-    lo, hi = orbit["nees_band"]
-    ax[2].axhspan(lo, hi, color="0.85", label="99 % χ² band")
+    for name in ("EFIR re-anchored nominal", "EFIR filter form", orbit.PAPER_FILTER, "EKF"):
+        r, ls = o["filters"][name], ":" if "re-anchored" in name else "-"
+        ax[1].semilogy(k[N:], r["rmse1"][N:], ls, lw=0.7, color=colours[name], label=name)
+        ax[2].semilogy(k[N:], r["nees"][N:], ls, lw=0.7, color=colours[name], label=name)
+    ax[1].semilogy(k[N:], o["filters"]["EKF"]["sd1"][N:], "--", lw=0.8, color="C3",
+                   label="EKF's own σ(x₁)")
+    ax[1].set_ylabel(f"x₁ RMSE ({o['runs']} runs)")
+    lo, hi = o["nees_band"]
+    ax[2].axhspan(lo, hi, color="0.85", label=f"{100 * orbit.NEES_CONFIDENCE:g} % χ² band")
     ax[2].set_ylabel("NEES (run average)")
-    ax[2].set_xlabel("k (measurement intervals of 0.01)")
+    ax[2].set_xlabel(f"k (measurement intervals of {o['dt']:g})")
     for a in ax:
         a.legend(fontsize=7, loc="upper left")
     ax[0].set_title("Paper 000 Fig. 1: orbit determination, μ_model = 19.91 (true 19.9224)")
     save(report, out_dir, "fig1_orbit", fig, "Paper 000 Fig. 1: EKF vs EFIR on the orbit")
 
-    osc = report.figures["oscillator"]
+    s2 = report.figures["oscillator"]
     fig, ax = new_figure(2, 1, height=3.0)
-    for a, (reading, res) in zip(ax, osc["readings"].items(), strict=True):
-        kk = np.arange(len(next(iter(res.values()))["rmse1"]))
-        sl = slice(WINDOW[0] - 50, None)
-        for i, name in enumerate(("EFIRF", "LKF", "EKF", "UKF")):
+    for a, u in zip(ax, osc.UNCERTAINTY, strict=True):
+        res = s2["readings"][(u, "Gp", "Rvar")]
+        kk = np.arange(len(res["EFIRF"]["rmse1"]))
+        sl = slice(osc.WINDOW[0] - 50, None)
+        for i, name in enumerate(("EFIRF", *osc.IIR)):
             a.semilogy(kk[sl], res[name]["rmse1"][sl], lw=0.9, color=f"C{i}", label=name)
-        a.axvspan(WINDOW[0], WINDOW[1] + 1, color="0.9", label="δ = 0.15")
-        a.set_ylabel(f"x₁ RMSE ({osc['runs']} runs)")
-        a.set_title(f"Paper 000 Fig. 2, uncertainty='{reading}'")
+        a.axvspan(osc.WINDOW[0], osc.WINDOW[1] + 1, color="0.9", label=f"δ = {osc.DELTA:g}")
+        a.set_ylabel(f"x₁ RMSE ({s2['runs']} runs)")
+        a.set_title(f"Paper 000 Fig. 2, reading {u}·Gp·Rvar", fontsize=9)
         a.legend(fontsize=7, loc="upper right")
     ax[-1].set_xlabel("k")
     save(report, out_dir, "fig2_oscillator", fig,
-         "Paper 000 Fig. 2: x1 RMSE around the uncertainty window, both readings")
+         "Paper 000 Fig. 2: x1 RMSE around the uncertainty window, both readings of eq 29")

@@ -2,16 +2,23 @@
 
 ``fir_gym/UncertainOscillator-v0`` with the paper's settings (eqs 29–31): Q = 0.4,
 R = 0.1, Δ = 0.01, x0 = [0, 0, 0.5], δ_k = 0.15 for 350 ≤ k ≤ 400. Every filter
-uses the env's model — δ = 0, noise input ``G = [0; Δ; 0]`` with ``Q = 0.4`` — and
 starts at the true state with P0 = 2 I; the EFIR has N = 10 (predictor form, open-
-loop nominal, as the paper). Both readings of eq (29) run: ``"state"`` (printed:
-δ scales the state) and ``"rate"`` (δ scales the rate term).
+loop nominal, as the paper). Three ambiguities, every combination run
+(:data:`READINGS`; docs/papers.md#000-eq-29-readings, #000-sim-2-noise-input and
+docs/papers.md#000-sim-2-r-reading):
+
+* eq (29): δ scales the state (``"state"``, as printed) or the rate term (``"rate"``);
+* the filters' noise input: the plant's ``G = [0; Δ; 0]`` or ``G = I`` (Theorem 1's
+  substitution ``G_k → I``, with ``Q = 0.4 I``);
+* ``R = 0.1``: a variance (as eq 31 writes it) or a standard deviation (variance
+  0.01, plant and filters).
 
 Table 1 is the sum over k = 350..400 of the Monte Carlo RMSE of x₁ at each k.
-Beside it: the floor no unbiased 10-measurement FIR predictor can beat under
-R = 0.1 (:func:`unbiased_floor`), the recovery time after the window, and a
-diagnostic run in which the filters assume ``G = I`` (Theorem 1's substitution
-``G_k → I``), which is not the plant's noise input.
+Beside it: the floor no unbiased 10-measurement FIR estimate can beat
+(:func:`unbiased_floor`, docs/papers.md#000-table-1-floor), and the claims of §5 around
+Fig. 2 (:mod:`.paper000_oscillator_report`, docs/papers.md#000-sim-2-claims).
+Each task simulates one reading's data (seeded chunks of the vector env) and runs a
+group of filters on it; the client only assembles.
 """
 
 from __future__ import annotations
@@ -21,7 +28,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fir_gym.envs.uncertain_oscillator import UNCERTAINTY_READINGS
 from fir_gym.estimators import (
     ExtendedFIRFilter,
     ExtendedKalmanFilter,
@@ -40,45 +46,82 @@ from ._montecarlo import (
     stack_episodes,
     task_seed,
 )
-from .report import Report
-from .runner import SERIAL, Runner
+from .plan import Task
+from .prose import Printed, say
 
 ENV_ID = "fir_gym/UncertainOscillator-v0"
 X0 = (0.0, 0.0, 0.5)
-P0 = 2.0 * np.eye(3)
+P0 = 2.0 * np.eye(3)           # the filters' prior, P0 = 2 I
 HORIZON = 10
 WINDOW = (350, 400)                 # δ_k = 0.15 for these k (transitions x[k] → x[k+1])
-#: Table 1 of paper 000 (sum over k = 350..400 of the x1 RMSE)
-PAPER_TABLE1 = {"EFIRF": 3.3969, "LKF": 44.4709, "EKF": 34.5498, "UKF": 13.3778}
+DELTA = 0.15
+#: Table 1 of paper 000 as printed (sum over k = 350..400 of the x1 RMSE)
+PAPER_TABLE1 = {k: Printed(v) for k, v in
+                {"EFIRF": "3.3969", "LKF": "44.4709", "EKF": "34.5498", "UKF": "13.3778"}.items()}
+IIR = ("LKF", "EKF", "UKF")
 #: the episode runs past the paper's k = 500 to measure the IIR filters' recovery
 STEPS = {False: 1500, True: 800}
 RUNS = {False: 100, True: 20}
 CHUNK = 25
-#: recovered once the RMSE stays within this factor of its own pre-window level
+#: recovered once the RMSE stays within this factor of a pre-window level
 RECOVERY_FACTOR = 2.0
 PRE_WINDOW = (300, 349)
+#: the readings: eq (29), the filters' noise input, what R = 0.1 is
+UNCERTAINTY = {"eq29": "state", "rate": "rate"}
+NOISE_INPUT = ("Gp", "GI")
+R_READINGS = {"Rvar": 0.1, "Rstd": 0.1 ** 2}
+FORMS = {"pred": "predictor", "filt": "filter"}
+READINGS = [(u, g, r) for u in UNCERTAINTY for g in NOISE_INPUT for r in R_READINGS]
+DEFAULT = ("eq29", "Gp", "Rvar")
+#: the plant's process noise (eq 30)
+Q_PAPER = 0.4
+LEGEND = {
+    "eq29": "δ scales the state, `x⁺ = diag(1+δ, 1+δ, 1) x + r(x)Δ` (eq 29 as printed)",
+    "rate": "δ scales the rate term, `x⁺ = x + diag(1+δ, 1+δ, 1) r(x)Δ`",
+    "Gp": "the filters use the plant's noise input `G = [0; Δ; 0]`",
+    "GI": say("the filters assume G = I, Q = {q:g} I (Theorem 1's G_k → I)", q=Q_PAPER),
+    "Rvar": say("R = {r:g} is the variance of v (eq 31)", r=R_READINGS["Rvar"]),
+    "Rstd": say("R = {r:g} is its standard deviation (variance {v:g}, plant and filters)",
+                r=R_READINGS["Rvar"], v=R_READINGS["Rstd"]),
+    "pred": "the EFIR's window ends one step before the estimate (the paper's eq 13)",
+    "filt": "its window ends at the estimate (the companion filter form)",
+}
 
 
-def oscillator_filters(model: StateSpaceModel, *, variants: bool = True) -> dict[str, Any]:
-    """Table 1's filters (keys as in the paper) and, with ``variants``, the EFIR variants."""
-    common = {"x0": X0, "P0": P0, "nan_policy": "skip"}
-    out = {"EFIRF": ExtendedFIRFilter(model, horizon=HORIZON, form="predictor", **common),
-           "LKF": LinearizedKalmanFilter(model, **common),
-           "EKF": ExtendedKalmanFilter(model, **common),
-           "UKF": UnscentedKalmanFilter(model, **common)}
-    if variants:
-        out["EFIR filter form"] = ExtendedFIRFilter(model, horizon=HORIZON, form="filter",
-                                                    **common)
-        out["EFIR re-anchored nominal"] = ExtendedFIRFilter(
-            model, horizon=HORIZON, form="predictor", nominal="reanchor", **common)
-    return out
+def code(reading: tuple[str, ...]) -> str:
+    """``("eq29", "Gp", "Rvar")`` → ``"eq29·Gp·Rvar"``."""
+    return "·".join(reading)
+
+
+def plant_model(R: float) -> StateSpaceModel:
+    """The env's model (δ = 0, G = [0; Δ; 0], Q = 0.4) with measurement variance ``R``."""
+    env = gym.make(ENV_ID, R=R)
+    model = env.unwrapped.model     # type: ignore[attr-defined]
+    env.close()
+    return model
 
 
 def identity_noise_model(model: StateSpaceModel) -> StateSpaceModel:
-    """The env's model with ``G = I``, ``Q = 0.4 I``: the diagnostic reading (not the plant's)."""
+    """The model with ``G = I``, ``Q = 0.4 I``: the filters' reading of Theorem 1's ``G_k → I``."""
     return StateSpaceModel(f=model.f, h=model.h, F=model.F, H=model.H,
                            Q=float(model.Q[0, 0]) * np.eye(model.n_x), R=model.R, dt=model.dt,
                            n_u=model.n_u, name="UncertainOscillator (filters assume G = I)")
+
+
+def oscillator_filters(model: StateSpaceModel, *, variants: bool = True) -> dict[str, Any]:
+    """Table 1's filters (keys as in the paper), the EFIR's filter form and, with
+    ``variants``, its re-anchored nominal."""
+    common: dict[str, Any] = {"x0": X0, "P0": P0, "nan_policy": "skip"}
+    out: dict[str, Any] = {
+        "EFIRF": ExtendedFIRFilter(model, horizon=HORIZON, form="predictor", **common),
+        "EFIRF filter form": ExtendedFIRFilter(model, horizon=HORIZON, form="filter", **common),
+        "LKF": LinearizedKalmanFilter(model, **common),
+        "EKF": ExtendedKalmanFilter(model, **common),
+        "UKF": UnscentedKalmanFilter(model, **common)}
+    if variants:
+        out["EFIR re-anchored nominal"] = ExtendedFIRFilter(
+            model, horizon=HORIZON, form="predictor", nominal="reanchor", **common)
+    return out
 
 
 def unbiased_floor(model: StateSpaceModel, form: str = "predictor", horizon: int = HORIZON,
@@ -107,15 +150,18 @@ def unbiased_floor(model: StateSpaceModel, form: str = "predictor", horizon: int
 
 
 def recovery_time(rmse: np.ndarray, first_clean: int, pre: tuple[int, int] = PRE_WINDOW,
-                  factor: float = RECOVERY_FACTOR) -> tuple[int | None, float]:
-    """Steps after ``first_clean`` until the RMSE stays within ``factor`` × its pre-window level.
+                  factor: float = RECOVERY_FACTOR, level: float | None = None
+                  ) -> tuple[int | None, float]:
+    """Steps after ``first_clean`` until the RMSE stays within ``factor`` × a level.
 
-    The level is the largest RMSE over ``pre`` (an IIR filter's own error wanders slowly,
-    so its mean would call that wandering a perturbation). Returns ``(steps, level)``;
-    ``steps`` is None when the RMSE has not recovered by the end of the run.
-    ``first_clean`` is the first state produced by an unperturbed transition (401).
+    The level is ``level`` when given (a common, absolute one), else the largest RMSE
+    over ``pre`` (the filter's own: an IIR filter's error wanders slowly, so its mean
+    would call that wandering a perturbation). Returns ``(steps, level)``; ``steps``
+    is None when the RMSE has not recovered by the end of the run. ``first_clean`` is
+    the first state produced by an unperturbed transition (401).
     """
-    level = float(np.max(rmse[pre[0]:pre[1] + 1]))
+    if level is None:
+        level = float(np.max(rmse[pre[0]:pre[1] + 1]))
     bad = np.flatnonzero(~(rmse[first_clean:] <= factor * level))
     if not bad.size:
         return 0, level
@@ -123,146 +169,90 @@ def recovery_time(rmse: np.ndarray, first_clean: int, pre: tuple[int, int] = PRE
     return (None if first_clean + last == len(rmse) - 1 else last + 1), level
 
 
-def simulate(reading: str, *, seed: int, runs: int, steps: int, runner: Runner,
-             delta: float = 0.15) -> Any:
-    """``runs`` episodes of the oscillator under ``reading``, in seeded chunks of the vector env."""
-    kwargs = {"uncertainty": reading, "delta_schedule": ((WINDOW[0], WINDOW[1], delta),)}
-    tasks = [VectorTask(ENV_ID, task_seed(seed, 1, i), n, steps, kwargs)
-             for i, n in enumerate(chunks(runs, CHUNK))]
-    return stack_episodes(runner.map(simulate_vector, tasks, desc=f"paper 000 sim 2 ({reading})"))
+def simulate(uncertainty: str, *, seed: int, runs: int, steps: int, R: float = 0.1,
+             delta: float = DELTA) -> Any:
+    """``runs`` episodes of the oscillator, seeded chunks of :data:`CHUNK` runs of the vector env.
+
+    The chunks and their seeds depend only on ``seed`` and ``runs``: every task that
+    needs the same data simulates the same bits.
+    """
+    kwargs = {"uncertainty": uncertainty, "delta_schedule": ((WINDOW[0], WINDOW[1], delta),),
+              "R": R}
+    return stack_episodes([simulate_vector(VectorTask(ENV_ID, task_seed(seed, 1, i), n, steps,
+                                                      kwargs))
+                           for i, n in enumerate(chunks(runs, CHUNK))])
 
 
-def run_oscillator(report: Report, *, seed: int, quick: bool, runs: int | None,
-                   runner: Runner | None) -> dict[str, Any]:
-    """Simulation 2 under both readings; fills ``report`` and returns the raw numbers."""
-    runner = runner or SERIAL
-    steps, runs = STEPS[quick], runs or RUNS[quick]
-    env = gym.make(ENV_ID)
-    model = env.unwrapped.model
-    env.close()
-    floor = {form: unbiased_floor(model, form) for form in ("predictor", "filter")}
-    out: dict[str, Any] = {"steps": steps, "runs": runs, "floor": floor, "readings": {}}
-    first_clean = WINDOW[1] + 1
-    for reading in UNCERTAINTY_READINGS:
-        ep = simulate(reading, seed=seed, runs=runs, steps=steps, runner=runner)
-        res: dict[str, Any] = {}
-        for label, m in (("", model), (" [G = I]", identity_noise_model(model))):
-            for name, f in oscillator_filters(m, variants=not label).items():
-                fr = run_filter(f, ep.Y, ep.U)
-                rm = rmse_per_step(fr.x[..., 0] - ep.X[..., 0])
-                rec, level = recovery_time(rm, first_clean)
-                total = float(np.sum(rm[WINDOW[0]:WINDOW[1] + 1]))
-                res[name + label] = {"rmse1": rm, "table1": total, "recovery": rec,
-                                     "pre_level": level, "flagged": int(np.sum(fr.diverged)),
-                                     "x3_end": float(np.nanmean(fr.x[-1, :, 2])),
-                                     "stable": bool(np.isfinite(rm).all() and rm.max() < 1e6)}
-        out["readings"][reading] = res
-        if reading == "state":
-            out["peak_x1"] = float(np.nanmax(ep.X[..., 0]))
-    _fill(report, out)
+def filter_group(task: tuple[str, str, str, int, int, int]) -> dict[str, Any]:
+    """One reading's data and one noise-input group of filters; a runner task.
+
+    ``task = (u, g, r, seed, runs, steps)`` with reading codes ``u`` (eq 29), ``g``
+    (noise input) and ``r`` (what R is). Returns, per filter, the x₁ RMSE at every
+    step and what the report needs of it.
+    """
+    u, g, r, seed, runs, steps = task
+    ep = simulate(UNCERTAINTY[u], seed=seed, runs=runs, steps=steps, R=R_READINGS[r])
+    model = plant_model(R_READINGS[r])
+    model = model if g == "Gp" else identity_noise_model(model)
+    out: dict[str, Any] = {}
+    for name, f in oscillator_filters(model, variants=g == "Gp").items():
+        fr = run_filter(f, ep.Y, ep.U)
+        e1 = fr.x[..., 0] - ep.X[..., 0]
+        rm = rmse_per_step(e1)
+        rec, level = recovery_time(rm, WINDOW[1] + 1)
+        out[name] = {"rmse1": rm, "table1": float(np.sum(rm[WINDOW[0]:WINDOW[1] + 1])),
+                     "se": se_of_sum(e1, rm),
+                     "recovery": rec, "pre_level": level, "flagged": int(np.sum(fr.diverged)),
+                     "x3_end": float(np.nanmean(fr.x[-1, :, 2])),
+                     "stable": bool(np.isfinite(rm).all() and rm.max() < 1e6)}
+    out["peak_x1"] = float(np.nanmax(ep.X[..., 0]))
     return out
 
 
-def _fmt_recovery(r: dict[str, Any], steps: int) -> str:
-    if not r["stable"]:
-        return "diverges"
-    return f"> {steps - WINDOW[1] - 1}" if r["recovery"] is None else str(r["recovery"])
+def floor_task(task: tuple[str, str]) -> np.ndarray:
+    """:func:`unbiased_floor` for reading ``r`` and form ``f`` (codes); a runner task."""
+    r, form = task
+    return unbiased_floor(plant_model(R_READINGS[r]), FORMS[form])
 
 
-def _finite(v: float) -> bool:
-    return bool(np.isfinite(v) and abs(v) < 1e6)
+def tasks(seed: int, quick: bool, runs: int | None) -> tuple[list[Any], list[Task]]:
+    """The keys and tasks of simulation 2: every reading × noise-input group, and the floors."""
+    steps, runs = STEPS[quick], runs or RUNS[quick]
+    keys: list[Any] = []
+    out = []
+    for u, g, r in READINGS:
+        keys.append((u, g, r))
+        out.append(Task(filter_group, (u, g, r, seed, runs, steps),
+                        cost=(6 if g == "Gp" else 5) * 1.7e-6 * runs * steps))
+    for r in R_READINGS:
+        for form in FORMS:
+            keys.append(("floor", r, form))
+            out.append(Task(floor_task, (r, form), cost=0.3))
+    return keys, out
 
 
-def _ordering(res: dict[str, Any], suffix: str = "") -> str:
-    """The IIR filters sorted by their Table 1 sum, largest first ("LKF > EKF > UKF")."""
-    names = sorted(("LKF", "EKF", "UKF"), key=lambda n: -res[n + suffix]["table1"])
-    return " > ".join(names)
+def collect(keys: list[Any], results: list[Any], *, quick: bool, runs: int | None
+            ) -> dict[str, Any]:
+    """The raw numbers of simulation 2 (``report.figures["oscillator"]``)."""
+    out: dict[str, Any] = {"steps": STEPS[quick], "runs": runs or RUNS[quick], "readings": {},
+                           "floor": {}}
+    for key, res in zip(keys, results, strict=True):
+        if key[0] == "floor":
+            out["floor"][key[1:]] = res
+        else:
+            out["readings"][key] = res
+    return out
 
 
-def _fill(report: Report, out: dict[str, Any]) -> None:
-    K, M = out["steps"], out["runs"]
-    fl_p, fl_f = (float(np.sum(out["floor"][f])) for f in ("predictor", "filter"))
-    sd = out["floor"]["predictor"]
-    readings = {"state": "uncertainty='state' (printed eq 29)",
-                "rate": "uncertainty='rate' (milder reading)"}
-    st, rt = out["readings"]["state"], out["readings"]["rate"]
-    for name, paper in PAPER_TABLE1.items():
-        for reading, text in readings.items():
-            res = out["readings"][reading]
-            if name == "EFIRF":
-                note = (f"no unbiased N = 10 predictor beats the floor Σσ(x₁) = {fl_p:.2f} under "
-                        "R = 0.1 (floor row)")
-            elif reading == "state":
-                note = ("filters use the plant's G = [0; Δ; 0]: tiny gains after 350 steps, they "
-                        "cannot follow the ≈ 15 %/step growth; if they assume G = I: "
-                        f"{res[name + ' [G = I]']['table1']:.4g}")
-            else:
-                note = ("δ scales the rate term, ≈ 0 at rest: the uncertainty is nearly invisible; "
-                        f"G = I: {res[name + ' [G = I]']['table1']:.4g}")
-            report.compare(f"Table 1: {name} (Σ_k=350..400 RMSE x₁)", f"{paper:g}",
-                           res[name]["table1"], f"{text}; env's model (G = [0; Δ; 0]), {M} runs",
-                           note)
-    report.compare("Table 1: EFIRF floor (unbiased FIR predictor, N = 10, R = 0.1, no model "
-                   "error)", f"{PAPER_TABLE1['EFIRF']:g}", fl_p,
-                   "the EFIR's own linearisation along its nominal, corrected Theorem 1 gain",
-                   f"σ(x₁) = {sd.min():.2f}–{sd.max():.2f} per step (filter form: Σ = {fl_f:.2f}); "
-                   "the paper's EFIRF entry is below it: not reachable "
-                   "(docs/papers.md#000-table-1-floor)")
-    rec = ", ".join(f"{n} {_fmt_recovery(st[n], K)}" for n in ("EFIRF", "LKF", "EKF", "UKF"))
-    fast = st["EFIRF"]["recovery"] is not None and all(
-        st[n]["recovery"] is None or st[n]["recovery"] > st["EFIRF"]["recovery"]
-        for n in ("LKF", "EKF", "UKF"))
-    report.compare("Fig. 2 claim: after k = 400 the EFIR converges fast, the IIR filters slowly",
-                   "claim (figure only)", f"steps after x[401] until the x₁ RMSE stays within "
-                   f"{RECOVERY_FACTOR:g}× its largest pre-window value: {rec}", readings["state"],
-                   ("reproduced" if fast else "NOT reproduced") + ": a FIR estimate forgets "
-                   f"within N (the predictor's window y[k−10..k−1] is clean from k = "
-                   f"{WINDOW[1] + 1 + HORIZON}); the EKF/UKF absorb the error into x̂₃, which has "
-                   "no process noise")
-    rows = []
-    for reading in readings:
-        for name, r in out["readings"][reading].items():
-            paper = PAPER_TABLE1.get(name)
-            rows.append([reading, name, None if paper is None else f"{paper:g}",
-                         r["table1"] if _finite(r["table1"]) else "unstable",
-                         r["pre_level"] if _finite(r["pre_level"]) else None,
-                         _fmt_recovery(r, K),
-                         r["flagged"]])
-    report.add_table(
-        f"Sim 2 (Table 1, Fig. 2): Σ_k=350..400 of the x₁ RMSE, {M} runs, k = 0..{K}",
-        ["reading", "filter", "paper", "ours", "max RMSE k=300..349",
-         f"recovery (steps, ≤ {RECOVERY_FACTOR:g}× pre level)", "runs flagged"], rows)
-    iir = [st[n]["table1"] for n in ("LKF", "EKF", "UKF")]
-    report.notes += [
-        f"Sim 2 floor: along the EFIR's nominal (at rest by k = 350, x₂ ≈ 0) x₃ is almost "
-        f"unobservable in a 10-measurement window; the unbiased predictor's σ(x₁) is "
-        f"{sd.min():.2f}–{sd.max():.2f} per step, Σ = {fl_p:.2f} over k = 350..400 (filter form "
-        f"{fl_f:.2f}): {fl_p / PAPER_TABLE1['EFIRF']:.1f}× the paper's 3.3969 before any model "
-        f"error. Under the rate reading (δ has no effect at rest) our EFIRF gives "
-        f"{rt['EFIRF']['table1']:.2f}, at this floor up to Monte Carlo error.",
-        "Sim 2, IIR filters: with the plant's noise input G = [0; Δ; 0] the process noise moves "
-        "x₂ by Δ·√0.4 ≈ 0.006 per step, so after 350 steps the LKF/EKF/UKF gains are tiny. Under "
-        f"the printed reading (truth growing ≈ 15 % per step, x₁ up to "
-        f"{out['peak_x1']:.3g}) they cannot follow: sums {min(iir):.4g}–{max(iir):.4g}. Under the "
-        f"rate reading they sit far below the EFIR ({_ordering(rt)}). Neither gives the paper's "
-        "44.47 / 34.55 / 13.38 (LKF > EKF > UKF). In the diagnostic rows '[G = I]' the filters "
-        "assume Q = 0.4 I on every state (Theorem 1's substitution G_k → I; not the plant's "
-        f"model): printed reading {_ordering(st, ' [G = I]')} with "
-        + " / ".join(f"{st[n + ' [G = I]']['table1']:.4g}" for n in ("LKF", "EKF", "UKF"))
-        + (" (the EKF [G = I] diverges after the window)" if not st["EKF [G = I]"]["stable"]
-           else "")
-        + ". The paper's filter G is ambiguous; the summary reports the env's model.",
-        "Sim 2, EFIR variants: the re-anchored nominal is "
-        + ("unstable" if not _finite(st["EFIR re-anchored nominal"]["table1"]) else "stable")
-        + " on this plant: each window's nominal starts at the previous estimate, whose x̂₃ is "
-        "nearly unobservable at rest, and the Euler step of the nominal diverges once the "
-        "damping x₃ exceeds 2/(10Δ) = 20. The EFIRs are flagged 'diverged' by trace(P) > 1e12 "
-        "for the same reason (σ(x̂₃) is huge) while their x₁ estimate is sound.",
-        f"Sim 2 recovery: the run continues to k = {K} (the paper plots to 500); recovery time is "
-        f"the number of steps after x[401] until the x₁ RMSE stays within {RECOVERY_FACTOR:g}× "
-        f"its largest value over k = {PRE_WINDOW[0]}..{PRE_WINDOW[1]} ('> n': not within the run). "
-        f"The EKF and UKF do not recover because the uncertainty was absorbed into the damping "
-        f"estimate, which has no process noise: mean x̂₃ at k = {K} is "
-        f"{st['EKF']['x3_end']:.3g} (EKF), {st['UKF']['x3_end']:.3g} (UKF), "
-        f"{st['LKF']['x3_end']:.3g} (LKF) against the true 0.5.",
-    ]
+def se_of_sum(err: np.ndarray, rmse: np.ndarray, window: tuple[int, int] = WINDOW) -> float:
+    """The Monte Carlo standard error of Table 1's sum ``Σ_k RMSE_k`` (delta method).
+
+    With ``RMSE_k = √(mean_b e²_kb)``, to first order the sum is the run average of
+    ``z_b = Σ_k e²_kb / (2 RMSE_k)`` (plus a constant), so its standard error is
+    ``std(z) / √M``; the correlation of the terms over k is kept.
+    """
+    sl = slice(window[0], window[1] + 1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        z = np.nansum(err[sl] ** 2 / (2.0 * rmse[sl, None]), axis=0)
+    z = z[np.isfinite(z)]
+    return float(np.std(z, ddof=1) / np.sqrt(len(z))) if len(z) > 1 else float("inf")

@@ -1,21 +1,28 @@
 """Paper 003: UKF-based state and parameter estimation of the pendulum-slider (Tables 4, 5).
 
-The experiment: PendulumSlider-v0 with the paper's friction term, from rest
-(``x = x_rest``, 10.8 mm), driven by ``U = 5 sin 2πt`` N, all four states measured
-with ``R = diag([0.003, 0.03, 0.03, 0.3]²)`` at 1 kHz. The UKF (and, beside it,
-the EKF) runs on the state augmented with ``[μ, M0]`` (constant: ``Q_params = 0``),
-with ``Q = 1e-6 I``, ``P0 = I6`` and a zero initial estimate. The least-squares
-method (LSM) regresses the equations of motion on finite-difference accelerations.
-A Monte Carlo over measurement-noise seeds gives every figure as mean ± std.
+The experiment: PendulumSlider-v0 with the paper's friction term, all four states
+measured with ``R = diag([0.003, 0.03, 0.03, 0.3]²)`` at 1 kHz; the UKF (and, beside
+it, the EKF) runs on the state augmented with ``[μ, M0]`` (constant: ``Q_params = 0``),
+with ``Q = 1e-6 I``, ``P0 = I6`` and a zero initial estimate. The least-squares method
+(LSM) regresses the equations of motion on finite-difference accelerations. A Monte
+Carlo over measurement-noise seeds gives every figure as mean ± spread.
 
-The paper gives neither the duration nor the initial state; we report the state
-RMSE over the first second (and the parameter errors at 0.5 s, the paper's
-"converged within 0.1 s" claim included).
+The paper gives neither the input, the initial state, the duration nor the window
+its RMSEs are taken over (docs/papers.md#003-experiment-reading). A :class:`Cell`
+fixes them (input ``A sin 2πft`` N, initial angle θ₀ from the rest position, duration
+``T``) and the equations of motion (physical, or the printed eq 15 / eq 5 of
+PendulumSlider-v0's ``dynamics``, docs/papers.md#003-printed-equations). Named cells
+(:data:`CELLS`): ``quiet`` (5 N, 1 Hz, from rest, 1 s: our default), ``lively``
+(10 N, 1 Hz, θ₀ = 0.5 rad, 5 s, scored from 0.5 s) and the printed equations on both;
+:data:`SWEEP` varies amplitude, frequency, initial angle and duration. Each task is a
+chunk of runs of one cell — episodes, the batched UKF/EKF, the LSM — reduced to per-run
+sums; :mod:`.paper003_report` writes the report.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import itertools
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,16 +30,89 @@ import gymnasium as gym
 import numpy as np
 
 from ..estimators import ExtendedKalmanFilter, UnscentedKalmanFilter, augment
+from ._montecarlo import chunks
+from .plan import Stage, Task, run_plan
+from .prose import Printed, say
 from .report import Report
-from .runner import SERIAL, Runner
+from .runner import Runner
 
+ENV_ID = "fir_gym/PendulumSlider-v0"
 #: Table 4: state RMSE of the UKF estimate and of the measurement
-PAPER_TABLE4 = {"x": (0.0010, 0.003), "x_dot": (0.0063, 0.0302), "theta": (0.0040, 0.0294),
-                "theta_dot": (0.0361, 0.3008)}
+PAPER_TABLE4 = {k: tuple(map(Printed, v)) for k, v in {
+    "x": ("0.0010", "0.003"), "x_dot": ("0.0063", "0.0302"), "theta": ("0.0040", "0.0294"),
+    "theta_dot": ("0.0361", "0.3008")}.items()}
 #: Table 5: parameter errors (UKF: RMSE; LSM: error of the estimate)
-PAPER_TABLE5 = {"UKF": {"mu": 0.0044, "M0": 0.0010}, "LSM": {"mu": -0.0119, "M0": -0.7251}}
+PAPER_TABLE5 = {"UKF": {"mu": Printed("0.0044"), "M0": Printed("0.0010")},
+                "LSM": {"mu": Printed("-0.0119"), "M0": Printed("-0.7251")}}
 TRUE = {"mu": 0.2, "M0": 0.2}
 DT = 1e-3
+#: the paper's claims (§5, §6): within this share of the truth, within this time
+WITHIN, CONVERGED_BY = 0.03, 0.1
+#: a claim about one run holds when this share of the runs meets it
+CLAIM_SHARE = 0.95
+#: the time of the parameter snapshot of the tests and figures (s)
+HALF = 0.5
+DIFFERENCES = ("backward", "forward", "central")
+PARAMS = ("mu", "M0")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One experiment: input ``amplitude · sin 2π·frequency·t`` N from ``[x_rest, 0, θ₀, 0]`` for
+    ``seconds``, under ``dynamics``; Table 4 scored from ``t4``, Table 5 from ``t5`` seconds."""
+
+    amplitude: float = 5.0
+    frequency: float = 1.0
+    theta0: float = 0.0
+    seconds: float = 1.0
+    dynamics: str = "physical"
+    t4: float = 0.0
+    t5: float = 0.1
+
+    @property
+    def steps(self) -> int:
+        return round(self.seconds / DT)
+
+    @property
+    def label(self) -> str:
+        """``A5·f1·θ0·T1`` (and the equations when printed)."""
+        base = say("A{a:g}·f{f:g}·θ{t:g}·T{s:g}", a=self.amplitude, f=self.frequency,
+                   t=self.theta0, s=self.seconds)
+        return base if self.dynamics == "physical" else say(
+            "{d}·{b}", d=self.dynamics.removeprefix("printed-"), b=base)
+
+
+QUIET = Cell()
+LIVELY = Cell(amplitude=10.0, theta0=0.5, seconds=5.0, t4=0.5, t5=0.5)
+#: the named cells of the summary: (name, cell)
+CELLS = {"quiet": QUIET, "lively": LIVELY,
+         "eq15·quiet": replace(QUIET, dynamics="printed-eq15"),
+         "eq15·lively": replace(LIVELY, dynamics="printed-eq15"),
+         "eq5·quiet": replace(QUIET, dynamics="printed-eq5"),
+         "eq5·lively": replace(LIVELY, dynamics="printed-eq5")}
+DEFAULT = "quiet"
+#: the sensitivity sweep (physical equations), full and quick
+SWEEP_AXES: dict[bool, dict[str, tuple[float, ...]]] = {
+    False: {"amplitude": (5.0, 10.0), "frequency": (1.0, 2.0), "theta0": (0.0, 0.5),
+            "seconds": (1.0, 5.0)},
+    True: {"amplitude": (5.0, 10.0), "frequency": (1.0,), "theta0": (0.0, 0.5),
+           "seconds": (1.0,)}}
+#: the two scorings of every sweep cell: (t4, t5)
+SCORINGS = ((0.0, 0.1), (0.5, 0.5))
+RUNS = {False: 50, True: 5}
+SWEEP_RUNS = {False: 10, True: 3}
+CHUNK = 10
+
+
+def sweep(quick: bool) -> list[Cell]:
+    """Every combination of :data:`SWEEP_AXES` (scored both ways, :data:`SCORINGS`)."""
+    axes: dict[str, tuple[float, ...]] = SWEEP_AXES[quick]
+    out = []
+    for values in itertools.product(*axes.values()):
+        v = dict(zip(axes, values, strict=True))
+        out.append(Cell(amplitude=v["amplitude"], frequency=v["frequency"], theta0=v["theta0"],
+                        seconds=v["seconds"]))
+    return out
 
 
 @dataclass
@@ -43,52 +123,75 @@ class Episodes:
     X: np.ndarray        # (K+1, B, 4) true states
     actions: np.ndarray  # (K, B, 1) normalised inputs u[0..K-1]
     force_max: float
-    model: object        # the env's parametric model (the filters' belief)
-    dynamics: object     # the ODE with the same nominal parameters (for least squares)
+    model: Any           # the env's parametric model (the filters' belief)
+    dynamics: Any        # the ODE with the same nominal parameters (for least squares)
+
+
+def make_env(cell: Cell) -> Any:
+    """The cell's PendulumSlider-v0 (unwrapped, no time limit)."""
+    return gym.make(ENV_ID, max_episode_steps=None, dynamics=cell.dynamics).unwrapped
+
+
+def cell_input(k: np.ndarray | int, cell: Cell = QUIET, force_max: float = 10.0) -> np.ndarray:
+    """The normalised action of ``A sin 2πft`` N at steps ``k`` (``force_max`` newtons per unit)."""
+    return (cell.amplitude / force_max) * np.sin(2.0 * np.pi * cell.frequency * DT
+                                                 * np.asarray(k, dtype=float))
 
 
 def paper_input(k: np.ndarray | int) -> np.ndarray:
-    """The normalised action of the paper's ``U = 5 sin 2πt`` N (``force_max`` = 10 N)."""
-    return 0.5 * np.sin(2.0 * np.pi * np.asarray(k) * DT)
+    """The normalised action of the default ``U = 5 sin 2πt`` N."""
+    return cell_input(k)
 
 
-def episode(task: tuple[int, float]) -> tuple[np.ndarray, np.ndarray]:
-    """One run ``(seed, seconds)`` of PendulumSlider-v0 from rest under the paper's input.
-
-    Returns measurements and true states, each ``(K+1, 4)``; a runner task (seeded).
-    """
-    seed, seconds = task
-    env = gym.make("fir_gym/PendulumSlider-v0", max_episode_steps=None).unwrapped
-    y0, info = env.reset(seed=seed, options={"state": [env.x_rest, 0.0, 0.0, 0.0]})
+def episode(task: tuple[int, float] | tuple[int, float, Cell]) -> tuple[np.ndarray, np.ndarray]:
+    """One seeded episode of a cell (default :data:`QUIET`, ``seconds`` long): ``(y, x)``,
+    each ``(K+1, 4)``."""
+    seed, seconds, cell = (*task, QUIET) if len(task) == 2 else task
+    env = make_env(cell)
+    y0, info = env.reset(seed=seed, options={"state": [env.x_rest, 0.0, cell.theta0, 0.0]})
     ys, xs = [y0], [info["state"]]
     for k in range(round(seconds / DT)):
-        y, _, _, _, info = env.step(np.array([paper_input(k)]))
+        y, _, terminated, _, info = env.step(np.array([cell_input(k, cell,
+                                                                  env.params["force_max"])]))
         ys.append(y)
         xs.append(info["state"])
+        if terminated:
+            break
     env.close()
     return np.array(ys), np.array(xs)
 
 
-def simulate(seeds: range | list[int], seconds: float, runner: Runner | None = None) -> Episodes:
-    """Run PendulumSlider-v0 from rest under the paper's input once per seed (one task each)."""
-    runner = runner or SERIAL
-    out = runner.map(episode, [(seed, seconds) for seed in seeds], desc="paper 003 episodes")
-    env = gym.make("fir_gym/PendulumSlider-v0", max_episode_steps=None).unwrapped
-    steps = round(seconds / DT)
-    actions = np.broadcast_to(paper_input(np.arange(steps))[:, None, None],
+def simulate(seeds: range | list[int], seconds: float, runner: Runner | None = None,
+             cell: Cell = QUIET) -> Episodes:
+    """Episodes of ``cell`` for ``seconds``, one per seed (one task each)."""
+    plan = Stage([Task(episode, (seed, seconds, cell)) for seed in seeds], lambda out: out)
+    return _episodes(run_plan(plan, runner), cell, round(seconds / DT))
+
+
+def _episodes(out: list[tuple[np.ndarray, np.ndarray]], cell: Cell, steps: int) -> Episodes:
+    env = make_env(cell)
+    fmax = env.params["force_max"]
+    actions = np.broadcast_to(cell_input(np.arange(steps), cell, fmax)[:, None, None],
                               (steps, len(out), 1)).copy()
-    episodes = Episodes(np.stack([o[0] for o in out], axis=1), np.stack([o[1] for o in out],
-                                                                       axis=1),
-                        actions, env.params["force_max"], env.model, env.dynamics)
+    ep = Episodes(_stack([o[0] for o in out], steps), _stack([o[1] for o in out], steps),
+                  actions, fmax, env.model, env.dynamics)
     env.close()
-    return episodes
+    return ep
+
+
+def _stack(parts: list[np.ndarray], steps: int) -> np.ndarray:
+    """Runs along axis 1, NaN after a run that left the rail."""
+    out = np.full((steps + 1, len(parts), parts[0].shape[1]), np.nan)
+    for b, p in enumerate(parts):
+        out[:len(p), b] = p
+    return out
 
 
 def joint_estimates(episodes: Episodes, method: str = "ukf") -> np.ndarray:
     """Estimates ``(K+1, B, 6)`` of ``[x, ẋ, θ, θ̇, μ, M0]`` by the batched UKF or EKF."""
-    model = augment(episodes.model, ["mu", "M0"])
+    model = augment(episodes.model, list(PARAMS))
     cls = {"ukf": UnscentedKalmanFilter, "ekf": ExtendedKalmanFilter}[method]
-    filt = cls(model, x0=np.zeros(6), P0=np.eye(6))
+    filt = cls(model, x0=np.zeros(6), P0=np.eye(6), nan_policy="skip")
     out = [filt.step(episodes.Y[0])]
     for k in range(1, episodes.Y.shape[0]):
         out.append(filt.step(episodes.Y[k], episodes.actions[k - 1]))
@@ -103,176 +206,127 @@ def lsm_estimates(episodes: Episodes, difference: str) -> np.ndarray:
                      for b in range(episodes.Y.shape[1])])
 
 
-def backward_bias_law(episodes: Episodes) -> float:
-    """The errors-in-variables bias of the backward-difference LSM estimate of M0.
+def settle_index(err: np.ndarray, within: float = WITHIN) -> np.ndarray:
+    """Per run and parameter, the first step from which ``|err| ≤ within·truth`` for good
+    (``K+1`` if never); ``err`` is ``(K+1, B, 2)``."""
+    truth = np.array([TRUE[p] for p in PARAMS])
+    outside = ~(np.abs(err) <= within * truth)
+    K1 = err.shape[0]
+    last = K1 - 1 - np.argmax(outside[::-1], axis=0)            # last step outside
+    return np.where(outside.any(axis=0), last + 1, 0).astype(int)
 
-    With measured ``θ̇ = θ̇_true + n`` (``σ = 0.3``), the regression
-    ``M0 θ̇ = ... - J (θ̇_k - θ̇_{k-1}) / dt`` (``J = I_c + m2 l²``) correlates its
-    regressor with its target through ``n_k``:
-    ``E[M0_hat] ≈ (M0 E[θ̇²] - J σ² / dt) / (E[θ̇²] + σ²)``.
+
+def runs_for(cell: Cell, runs: int) -> int:
+    """The runs of a cell: ``runs`` per second-long cell, fewer for longer ones (the same number
+    of samples; at least two, for a spread)."""
+    return max(2, round(runs / cell.seconds))
+
+
+def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[str, Any]]:
+    """One chunk of one or more cells of the same duration and equations, batched through one
+    filter; per cell its per-run sums (a runner task).
+
+    ``task = (cells, seed, chunk, n, with_ekf)``: ``n`` episodes per cell from seed
+    ``seed + chunk·CHUNK`` on, the UKF (and with ``with_ekf`` the EKF and run 0's series)
+    on all of them at once, the LSM per run.
     """
-    J = _hinge_inertia(episodes.dynamics)
-    sigma2 = float(episodes.model.R[3, 3])
-    Et = _mean_square_rate(episodes)
-    return (TRUE["M0"] * Et - J * sigma2 / DT) / (Et + sigma2) - TRUE["M0"]
+    cells, seed, chunk, n, with_ekf = task
+    seeds = range(seed + chunk * CHUNK, seed + chunk * CHUNK + n)
+    parts = [_episodes([episode((s, c.seconds, c)) for s in seeds], c, c.steps) for c in cells]
+    ep = replace_episodes(parts)
+    truth = np.array([TRUE[p] for p in PARAMS])
+    t = DT * np.arange(ep.X.shape[0])
+    est = {m: joint_estimates(ep, m) for m in (("ukf", "ekf") if with_ekf else ("ukf",))}
+    out = []
+    for i, (cell, part) in enumerate(zip(cells, parts, strict=True)):
+        runs = slice(i * n, (i + 1) * n)
+        X, Y = ep.X[:, runs], ep.Y[:, runs]
+        res: dict[str, Any] = {"n": n, "meas_sse": np.nansum((Y - X) ** 2, axis=0),
+                               "samples": np.isfinite(Y[..., 0]).sum(axis=0),
+                               "rate_ms": float(np.nanmean(X[1:, :, 3] ** 2)),
+                               "lsm": {d: lsm_estimates(part, d) for d in DIFFERENCES}
+                               if np.isfinite(Y).all() else None}
+        for method, e_all in est.items():
+            e = e_all[:, runs]
+            err = e[..., 4:] - truth
+            r: dict[Any, Any] = {}
+            for t4, t5 in {(cell.t4, cell.t5), *SCORINGS}:
+                s4, s5 = t >= t4 - DT / 2, t >= t5 - DT / 2
+                r[("state", t4)] = np.nansum((e[s4, :, :4] - X[s4]) ** 2, axis=0)
+                r[("n", t4)] = np.isfinite(X[s4, :, 0]).sum(axis=0)
+                r[("param", t5)] = np.nansum(err[s5] ** 2, axis=0)
+                r[("n", t5)] = np.isfinite(err[s5, :, 0]).sum(axis=0)
+            r.update({"end": err[-1], "half": e[min(round(HALF / DT), len(e) - 1), :, 4:],
+                      "at_converged": err[min(round(CONVERGED_BY / DT), len(e) - 1)],
+                      "settle": settle_index(err), "sum": np.nansum(err, axis=1),
+                      "sumsq": np.nansum(err ** 2, axis=1)})
+            if chunk == 0 and with_ekf:
+                r["run0"] = e[:, 0]
+            res[method] = r
+        if chunk == 0 and with_ekf:
+            res["series"] = {"X": X[:, 0], "Y": Y[:, 0]}
+        out.append(res)
+    return out
+
+
+def replace_episodes(parts: list[Episodes]) -> Episodes:
+    """Episodes of several cells side by side (same duration and model): one batch."""
+    first = parts[0]
+    return Episodes(np.concatenate([p.Y for p in parts], axis=1),
+                    np.concatenate([p.X for p in parts], axis=1),
+                    np.concatenate([p.actions for p in parts], axis=1), first.force_max,
+                    first.model, first.dynamics)
+
+
+#: the named cells run beside the UKF with the EKF (and give the figures' series)
+WITH_EKF = ("quiet", "lively")
+#: sweep cells batched through one filter per task
+SWEEP_GROUP = 4
+
+
+def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:
+    """Named cells (:data:`CELLS`, ``runs`` per second) and the sweep (:data:`SWEEP_RUNS`)."""
+    n_main = runs or RUNS[quick]
+    n_sweep = min(n_main, SWEEP_RUNS[quick])
+    jobs: list[tuple[tuple[str, ...], tuple[Cell, ...], int]] = [
+        ((name,), (c,), runs_for(c, n_main)) for name, c in CELLS.items()]
+    by_length: dict[float, list[Cell]] = {}
+    for c in sweep(quick):
+        by_length.setdefault(c.seconds, []).append(c)
+    for group in by_length.values():
+        for k in range(0, len(group), SWEEP_GROUP):
+            cells = tuple(group[k:k + SWEEP_GROUP])
+            jobs.append((("sweep",) * len(cells), cells, runs_for(cells[0], n_sweep)))
+    keys, tasks = [], []
+    for names, cells, n in jobs:
+        with_ekf = names[0] in WITH_EKF
+        for i, size in enumerate(chunks(n, CHUNK)):
+            keys.append(list(zip(names, cells, strict=True)))
+            sim = size * len(cells) * cells[0].seconds * (
+                0.04 if cells[0].dynamics == "physical" else 0.06)
+            cost = sim + cells[0].seconds * (0.3 if with_ekf else 0.2)
+            tasks.append(Task(cell_task, (cells, seed, i, size, with_ekf), cost=cost))
+
+    def then(results: list[Any]) -> Report:
+        from .paper003_report import assemble
+
+        merged: dict[tuple[str, Cell], list[Any]] = {}
+        for key, res in zip(keys, results, strict=True):
+            for name_cell, part in zip(key, res, strict=True):
+                merged.setdefault(name_cell, []).append(part)
+        return assemble(merged, n_main, n_sweep, quick)
+
+    return Stage(tasks, then, desc="paper 003")
 
 
 def run(seed: int = 0, quick: bool = False, runs: int | None = None,
         runner: Runner | None = None) -> Report:
-    """Reproduce Tables 4 and 5 (``quick``: 5 runs instead of 50)."""
-    runs = runs or (5 if quick else 50)
-    episodes = simulate(range(seed, seed + runs), seconds=1.0, runner=runner)
-    report = Report("003", "UKF state and parameter estimation of a pendulum-slider")
-    X, Y = episodes.X, episodes.Y
-    measurement_rmse = np.sqrt(np.mean((Y - X) ** 2, axis=(0, 1)))
-    est = {m: joint_estimates(episodes, m) for m in ("ukf", "ekf")}
-    state_rmse = {m: np.sqrt(np.mean((e[:, :, :4] - X) ** 2, axis=(0, 1))) for m, e in est.items()}
-    rows = []
-    for i, name in enumerate(PAPER_TABLE4):
-        paper_est, paper_meas = PAPER_TABLE4[name]
-        ours = state_rmse["ukf"][i]
-        rows.append([name, paper_est, ours, f"{100 * (ours / paper_est - 1):+.0f} %",
-                     state_rmse["ekf"][i], paper_meas, measurement_rmse[i]])
-    report.add_table(
-        f"Table 4 — state RMSE over the first second ({runs} runs)",
-        ["state", "paper UKF", "our UKF", "ours vs paper", "our EKF", "paper meas.", "our meas."],
-        rows)
-
-    truth = np.array([TRUE["mu"], TRUE["M0"]])
-    at_half = {m: e[500, :, 4:] for m, e in est.items()}
-    after_converged = {m: np.sqrt(np.mean((e[100:, :, 4:] - truth) ** 2, axis=(0, 1)))
-                       for m, e in est.items()}
-    lsm = {d: lsm_estimates(episodes, d) for d in ("backward", "forward", "central")}
-    rows = []
-    for j, name in enumerate(("mu", "M0")):
-        for m in ("ukf", "ekf"):
-            mean_err = at_half[m][:, j].mean() - truth[j]
-            rows.append([name, m.upper(), PAPER_TABLE5["UKF"][name] if m == "ukf" else None,
-                         after_converged[m][j],
-                         f"{mean_err:+.4f} ± {at_half[m][:, j].std():.4f}",
-                         f"{100 * mean_err / truth[j]:+.2f} %"])
-        for d in ("backward", "forward", "central"):
-            err = lsm[d][:, j] - truth[j]
-            rows.append([name, f"LSM {d}", PAPER_TABLE5["LSM"][name] if d == "backward" else None,
-                         None, f"{err.mean():+.4f} ± {err.std():.4f}",
-                         f"{100 * err.mean() / truth[j]:+.1f} %"])
-    report.add_table(
-        f"Table 5 — parameter errors ({runs} runs; truth μ = M0 = 0.2)",
-        ["param", "method", "paper", "our RMSE after 0.1 s",
-         "our error at 0.5 s (LSM: from 1 s)", "relative"], rows)
-
-    law = backward_bias_law(episodes)
-    J = _hinge_inertia(episodes.dynamics)
-    sigma2 = float(episodes.model.R[3, 3])
-    attenuation = -TRUE["M0"] * sigma2 / (_mean_square_rate(episodes) + sigma2)
-    report.figures.update({
-        "state_rmse": state_rmse, "measurement_rmse": measurement_rmse,
-        "params_at_half_second": at_half, "param_rmse_after_0.1s": after_converged,
-        "lsm": lsm, "backward_bias_law": law,
-        "series": {"t": DT * np.arange(X.shape[0]), "X": X[:, 0], "Y": Y[:, 0],
-                   "ukf": est["ukf"][:, 0], "param_mean": est["ukf"][:, :, 4:].mean(axis=1),
-                   "param_std": est["ukf"][:, :, 4:].std(axis=1)},
-        "convergence": convergence(est["ukf"][:, :, 4:], truth),
-    })
-    _compare(report, runs)
-    report.notes += [
-        "Table 4: the state RMSE depends on the (unreported) duration; over the first second "
-        "every UKF entry is within 30 % of the paper's.",
-        f"Table 5, UKF: our M0 RMSE is about ten times the paper's 0.0010. The Monte-Carlo "
-        f"spread of the UKF's M0 at 0.5 s is {100 * at_half['ukf'][:, 1].std() / 0.2:.1f} % of "
-        "M0 and agrees with the filter's own covariance (tests/estimators/test_augment.py), so "
-        "an RMSE of 0.0010 is not reachable with the paper's noise levels in this time; on "
-        "noise-free data (paper §5 says 'data without noise') the error is below 3 % after "
-        "0.5 s.",
-        f"Table 5, LSM backward: the M0 bias is errors-in-variables, ≈ (M0 E[θ̇²] − J σ²/dt)/"
-        f"(E[θ̇²] + σ²) − M0 = {law:+.3f} for this trajectory (E[θ̇²] = "
-        f"{_mean_square_rate(episodes):.2f} rad²/s²); the paper's −0.7251 is the same "
-        f"law for a livelier trajectory, E[θ̇²] ≈ {_energy_for_bias(-0.7251, J, sigma2):.1f} "
-        "rad²/s² "
-        "(the paper does not give its initial state or duration). Central differences remove "
-        "the correlation; what remains is the errors-in-variables attenuation "
-        f"−M0 σ²/(E[θ̇²] + σ²) = {attenuation:+.3f}.",
-    ]
-    return report
-
-
-def convergence(params: np.ndarray, truth: np.ndarray, within: float = 0.03) -> dict[str, Any]:
-    """When the UKF's parameters settle within ``within`` (3 %) of the truth (paper's claims).
-
-    ``params`` is ``(K+1, B, 2)``. Returns, per parameter, the time after which the
-    run-averaged estimate stays within the band, and the fraction of runs inside
-    the band at 0.1 s and at the end.
-    """
-    out: dict[str, Any] = {}
-    for j, name in enumerate(("mu", "M0")):
-        inside = np.abs(params[:, :, j] - truth[j]) <= within * truth[j]
-        mean_in = np.abs(params[:, :, j].mean(axis=1) - truth[j]) <= within * truth[j]
-        out_idx = np.flatnonzero(~mean_in)
-        settle = 0 if not out_idx.size else (None if out_idx[-1] == len(mean_in) - 1
-                                             else int(out_idx[-1] + 1))
-        out[name] = {"settle_time": None if settle is None else settle * DT,
-                     "runs_within_at_0.1s": float(inside[100].mean()),
-                     "runs_within_at_end": float(inside[-1].mean())}
-    return out
-
-
-def _settled_by(c: dict[str, Any], t: float) -> bool:
-    """Whether the run-averaged estimate is within the band from ``t`` seconds on (+ one step)."""
-    return c["settle_time"] is not None and c["settle_time"] <= t + 1.5 * DT
-
-
-def _compare(report: Report, runs: int) -> None:
-    """One summary row per number of Tables 4 and 5, and the two claims of §5."""
-    f = report.figures
-    reading = (f"PendulumSlider-v0, paper's friction term, from rest, U = 5 sin 2πt N, first "
-               f"second; {runs} runs")
-    for i, name in enumerate(PAPER_TABLE4):
-        paper_est, paper_meas = PAPER_TABLE4[name]
-        ours = float(f["state_rmse"]["ukf"][i])
-        report.compare(f"Table 4: UKF estimate RMSE, {name}", paper_est, ours, reading,
-                       f"{100 * (ours / paper_est - 1):+.0f} %; the duration is not given "
-                       "(RMSE over the first second)")
-        report.compare(f"Table 4: measurement RMSE, {name}", paper_meas,
-                       float(f["measurement_rmse"][i]), reading, "the paper's R (std)")
-    rmse = f["param_rmse_after_0.1s"]["ukf"]
-    for j, name in enumerate(("mu", "M0")):
-        report.compare(f"Table 5: UKF parameter RMSE, {name}", PAPER_TABLE5["UKF"][name],
-                       float(rmse[j]), reading + "; RMSE over t ≥ 0.1 s",
-                       "reproduced in magnitude" if rmse[j] <= 2 * PAPER_TABLE5["UKF"][name]
-                       else "the Monte-Carlo spread with the paper's noise is larger than the "
-                       "paper's RMSE: not reachable in this time (notes)")
-    for j, name in enumerate(("mu", "M0")):
-        err = f["lsm"]["backward"][:, j] - TRUE[name]
-        report.compare(f"Table 5: LSM error, {name}", PAPER_TABLE5["LSM"][name],
-                       float(err.mean()), reading + "; backward-difference accelerations",
-                       "errors-in-variables bias: its size depends on the unreported "
-                       "trajectory (notes)" if name == "M0" else
-                       ("within" if abs(err.mean() - PAPER_TABLE5["LSM"][name]) <= 2 * err.std()
-                        else "outside") + f" twice the run-to-run spread (± {err.std():.3f})")
-    conv = f["convergence"]
-    at_half = f["params_at_half_second"]["ukf"].mean(axis=0)
-    rel = 100 * (at_half - np.array([TRUE["mu"], TRUE["M0"]])) / 0.2
-    report.compare("§5 claim: estimated parameters within 3 %", "< 3 %",
-                   f"mean error at 0.5 s: μ {rel[0]:+.2f} %, M0 {rel[1]:+.2f} %; runs within "
-                   f"3 % at 1 s: μ {100 * conv['mu']['runs_within_at_end']:.0f} %, M0 "
-                   f"{100 * conv['M0']['runs_within_at_end']:.0f} %", reading,
-                   ("holds for the Monte-Carlo mean" if np.all(np.abs(rel) < 3) else
-                    "the Monte-Carlo mean is not within 3 % for every parameter")
-                   + ("; single runs scatter more than 3 %" if min(
-                       conv[k]["runs_within_at_end"] for k in conv) < 1 else ""))
-    settle = {k: ("not within 1 s" if v["settle_time"] is None else f"{v['settle_time']:.3f} s")
-              for k, v in conv.items()}
-    report.compare("§5 claim: converged within 100 samples (0.1 s)", "0.1 s",
-                   f"mean estimate within 3 % from μ {settle['mu']}, M0 {settle['M0']}; runs "
-                   f"within 3 % at 0.1 s: μ {100 * conv['mu']['runs_within_at_0.1s']:.0f} %, "
-                   f"M0 {100 * conv['M0']['runs_within_at_0.1s']:.0f} %", reading,
-                   ", ".join(f"{'reproduced' if _settled_by(conv[k], 0.1) else 'not reproduced'}"
-                             f" for {k}" for k in conv)
-                   + " (UKF from a zero estimate, P0 = I6, as the paper)")
+    """Tables 4 and 5 on every named cell and the sensitivity sweep (:func:`plan`)."""
+    return run_plan(plan(seed, quick, runs), runner)
 
 
 def plot(report: Report, out_dir: str | Path) -> None:
-    """Figs 3–5 of paper 003: states, parameter estimates and parameter errors."""
+    """Figs 3–5 of paper 003 (the default cell): states, parameter estimates and errors."""
     from ._plotting import new_figure, save
 
     s = report.figures["series"]
@@ -286,11 +340,11 @@ def plot(report: Report, out_dir: str | Path) -> None:
         a.set_ylabel(names[i])
     ax[0].legend(fontsize=7, ncol=3)
     ax[-1].set_xlabel("t (s)")
-    ax[0].set_title("Paper 003 Fig. 3: estimated states (run 0)")
+    ax[0].set_title(f"Paper 003 Fig. 3: estimated states (run 0, {DEFAULT})")
     save(report, out_dir, "fig3_states", fig, "Paper 003 Fig. 3: estimated states")
     for fig_no, errors in ((4, False), (5, True)):
         fig, ax = new_figure(2, 1, height=2.4, sharex=True)
-        for j, (a, name) in enumerate(zip(ax, ("mu", "M0"), strict=True)):
+        for j, (a, name) in enumerate(zip(ax, PARAMS, strict=True)):
             truth = TRUE[name]
             shift = truth if errors else 0.0
             mean, sd = s["param_mean"][:, j] - shift, s["param_std"][:, j]
@@ -308,18 +362,3 @@ def plot(report: Report, out_dir: str | Path) -> None:
                            else "estimated μ and M0"))
         save(report, out_dir, f"fig{fig_no}_{'param_errors' if errors else 'params'}", fig,
              f"Paper 003 Fig. {fig_no}: " + ("parameter errors" if errors else "parameters"))
-
-
-def _energy_for_bias(bias: float, J: float, sigma2: float) -> float:
-    """Solve the bias law for ``E[θ̇²]``: ``(M0 E − J σ²/dt)/(E + σ²) = M0 + bias``."""
-    return (J * sigma2 / DT + (TRUE["M0"] + bias) * sigma2) / (-bias)
-
-
-def _mean_square_rate(episodes: Episodes) -> float:
-    """``E[θ̇²]`` of the true trajectory."""
-    return float(np.mean(episodes.X[1:, :, 3] ** 2))
-
-
-def _hinge_inertia(dynamics: object) -> float:
-    """``J = I_c + m2 l²``, the pendulum's inertia about the hinge."""
-    return dynamics.I_c + dynamics.m2 * dynamics.l ** 2

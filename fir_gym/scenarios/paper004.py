@@ -36,17 +36,20 @@ from fir_gym.estimators import (
     TimeVaryingLinearModel,
     fir_gains,
 )
-from fir_gym.estimators.recursive_fir import AUTO_GROWTH
 
+from . import paper004_cost
 from ._montecarlo import EpisodeTask, run_filter, simulate_episode, stack_episodes, task_seed
-from .paper004_carrier import CORNERS, corner_label, run_comparison, summary, table_rows
+from .paper004_carrier import CORNERS, comparison_plan, corner_label, summary
+from .plan import Stage, Task, gather, run_plan
+from .prose import say
 from .report import Report
-from .runner import SERIAL, Runner
+from .runner import Runner
 
 ENV_ID = "fir_gym/CarrierMotion-v0"
 #: the two documented examples: CarrierMotion-v0 options and the number of steps simulated
-EXAMPLES = {"carrier, T = 0.1 s (paper 001)": ({"sample_period": 0.1}, 3000),
-            "carrier, T = 1 s, v = 0.01": ({"sample_period": 1.0, "v": 0.01}, 300)}
+EXAMPLES = {say("carrier, T = {t:g} s (paper 001)", t=0.1): ({"sample_period": 0.1}, 3000),
+            say("carrier, T = {t:g} s, v = {v:g}", t=1.0, v=0.01): (
+                {"sample_period": 1.0, "v": 0.01}, 300)}
 GAIN_HORIZONS = {False: (3, 11, 51), True: (3, 11)}
 RECURSIVE_HORIZON = 11
 WINDOW_STARTS = (0, 100, 1000, 3000)
@@ -58,7 +61,7 @@ GROWN = 1e-6
 def example_model(**env_kwargs: Any) -> LinearModel:
     """CarrierMotion-v0's nominal model without its (zero) input matrix: paper 004's (2.1)."""
     env = gym.make(ENV_ID, **env_kwargs)
-    m = env.unwrapped.model
+    m: Any = env.unwrapped.model                        # type: ignore[attr-defined]
     env.close()
     return LinearModel(A=m.A, C=m.C, Q=m.Q, R=m.R, G=m.G, dt=m.dt, name="carrier (paper 001)")
 
@@ -129,125 +132,67 @@ def recursion_check(model: LinearModel, Y: np.ndarray) -> dict[str, Any]:
     return out
 
 
+def example_task(task: tuple[int, int, bool]) -> dict[str, Any]:
+    """Example ``i`` of :data:`EXAMPLES`: one seeded episode, the recursive-vs-direct check and,
+    for the first, the re-derived time-varying gain against the fixed one (a runner task)."""
+    i, seed, quick = task
+    kw, steps = list(EXAMPLES.values())[i]
+    ep = stack_episodes([simulate_episode(EpisodeTask(ENV_ID, task_seed(seed, 40, i),
+                                                      steps if not quick else steps // 3, kw))])
+    model = example_model(**kw)
+    out: dict[str, Any] = {"recursion": recursion_check(model, ep.Y)}
+    if i == 0:
+        tv = TimeVaryingLinearModel(A=model.A, C=model.C, Q=model.Q, R=model.R, G=model.G,
+                                    dt=model.dt)
+        Y0 = ep.Y[:1000]
+        fixed = run_filter(FIRFilter(model, horizon=RECURSIVE_HORIZON), Y0).x
+        rederived = run_filter(FIRFilter(tv, horizon=RECURSIVE_HORIZON), Y0).x
+        out["tv_dev"] = _rel(rederived[RECURSIVE_HORIZON:], fixed[RECURSIVE_HORIZON:])
+    return out
+
+
+def algebra_task(task: tuple[str, tuple[int, ...]]) -> Any:
+    """The deterministic checks on the example model: ``"gains"``, ``"time"`` or ``"cost"``."""
+    kind, horizons = task
+    model = example_model()
+    if kind == "gains":
+        return gain_paths(model, horizons)
+    if kind == "time":
+        return time_invariance(model)
+    return paper004_cost.count(model)
+
+
+def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Any:
+    """The theorem checks (one task each), the examples, and the FIR-vs-Kalman comparison."""
+    horizons = GAIN_HORIZONS[quick]
+    local = Stage([Task(algebra_task, ("gains", horizons), cost=0.2),
+                   Task(algebra_task, ("time", horizons), cost=0.1),
+                   Task(algebra_task, ("cost", horizons), cost=1.5)]
+                  + [Task(example_task, (i, seed, quick), cost=1.0 if quick else 2.5)
+                     for i in range(len(EXAMPLES))], lambda out: out, desc="paper 004")
+
+    def assemble(values: list[Any]) -> Report:
+        (rows, ti, cost, *examples), comp = values
+        rec = {name: ex["recursion"] for name, ex in zip(EXAMPLES, examples, strict=True)}
+        report = Report("004", "Recursive FIR filters for discrete time-invariant state-space "
+                        "models (no numerical example: theorems checked, future work done)")
+        worst_path = max(v for row in rows for v in row[3:] if isinstance(v, float))
+        report.figures.update({"gain_paths": rows, "gain_paths_max": worst_path,
+                               "time_invariance": ti, "recursion": rec,
+                               "tv_vs_fixed": examples[0]["tv_dev"], "comparison": comp,
+                               "cost": cost})
+        from .paper004_report import fill
+
+        fill(report, horizons)
+        return report
+
+    return gather([local, comparison_plan(seed, quick, runs)], assemble, desc="paper 004")
+
+
 def run(seed: int = 0, quick: bool = False, runs: int | None = None,
         runner: Runner | None = None) -> Report:
     """The theorem checks and the FIR-vs-Kalman comparison (``runs`` sizes the latter)."""
-    runner = runner or SERIAL
-    report = Report("004", "Recursive FIR filters for discrete time-invariant state-space "
-                    "models (no numerical example: theorems checked, future work done)")
-    model = example_model()
-    rows = gain_paths(model, GAIN_HORIZONS[quick])
-    worst_path = max(v for row in rows for v in row[3:] if isinstance(v, float))
-    ti = time_invariance(model)
-    tasks = [EpisodeTask(ENV_ID, task_seed(seed, 40, i), steps if not quick else steps // 3, kw)
-             for i, (kw, steps) in enumerate(EXAMPLES.values())]
-    eps = [stack_episodes([r]) for r in runner.map(simulate_episode, tasks, desc="paper 004")]
-    rec = {name: recursion_check(example_model(**kw), ep.Y)
-           for (name, (kw, _)), ep in zip(EXAMPLES.items(), eps, strict=True)}
-    tv = TimeVaryingLinearModel(A=model.A, C=model.C, Q=model.Q, R=model.R, G=model.G,
-                                dt=model.dt)
-    Y0 = eps[0].Y[:1000]
-    fixed = run_filter(FIRFilter(model, horizon=RECURSIVE_HORIZON), Y0).x
-    rederived = run_filter(FIRFilter(tv, horizon=RECURSIVE_HORIZON), Y0).x
-    tv_dev = _rel(rederived[RECURSIVE_HORIZON:], fixed[RECURSIVE_HORIZON:])
-    comp = run_comparison(seed=seed, quick=quick, runs=runs, runner=runner)
-    report.figures.update({"gain_paths": rows, "gain_paths_max": worst_path,
-                           "time_invariance": ti, "recursion": rec, "tv_vs_fixed": tv_dev,
-                           "comparison": comp})
-    _fill(report, rows, worst_path, ti, rec, tv_dev, comp, GAIN_HORIZONS[quick])
-    return report
-
-
-def _fill(report: Report, rows: list[list[Any]], worst_path: float, ti: dict[str, Any],
-          rec: dict[str, Any], tv_dev: float, comp: dict[str, Any],
-          horizons: tuple[int, ...]) -> None:
-    ex = "carrier model of paper 001 (CarrierMotion-v0, T = 0.1 s)"
-    report.compare("Thm 2.1, Cor 2.1, Cor 2.2, Thm 3.1: Riccati-type recursions = the "
-                   "orthogonality conditions", "theorems (no numbers)",
-                   f"max relative difference of the gains over three paths: {worst_path:.1e}",
-                   f"{ex}; L = {', '.join(map(str, horizons))}; filter, predictor, "
-                   "smoother; with and without prior",
-                   "agree to round-off; the no-prior smoother has no Riccati form (Cor 3.2 "
-                   "needs [S − C'C]⁻¹, singular for fewer outputs than states)")
-    d = ti["drift"]
-    report.compare("Cor 2.1: a stationary process gives a time-invariant filter", "theorem",
-                   "Thm 2.1's gain vs Cor 2.1's, window start j after a known initial state: "
-                   + ", ".join(f"{v:.2g} (j={j})" for j, v in d.items()),
-                   f"{ex}; L = {RECURSIVE_HORIZON}",
-                   "confirmed: constant only once the process is stationary (A's poles at "
-                   f"modulus {np.max(np.abs(np.linalg.eigvals(example_model().A))):.4f})")
-    lim = ti["limit"]
-    report.compare("Cor 2.2: without a prior the filter is time-invariant", "theorem",
-                   "Thm 2.1 with prior c·I vs Cor 2.2: "
-                   + ", ".join(f"{v:.1e} (c={c:g})" for c, v in lim.items())
-                   + f"; gain re-derived every step vs fixed gain: max rel. Δx̂ {tv_dev:.1e}",
-                   f"{ex}; L = {RECURSIVE_HORIZON}",
-                   "confirmed: the no-prior gain is the c → ∞ limit, independent of the window "
-                   "start's covariance, hence of time")
-    for name, r in rec.items():
-        for form, v in r.items():
-            report.compare(f"Thm 4.1/Cor 4.1: recursive = direct form on the first steps "
-                           f"[{form}]", "theorem",
-                           f"max rel. deviation over k < {3 * RECURSIVE_HORIZON}: {v['first']:.1e}",
-                           name, "confirmed (with the corrected M4 and z(i−N) weight)")
-            grown = ("never within the run" if v["grown_at"] is None
-                     else f"after {v['grown_at']} steps")
-            report.compare(f"§IV: round-off of the recursion without re-initialisation [{form}]",
-                           "loses the FIR property (warning, no numbers)",
-                           f"ρ = {v['rho']:.4f}: deviation > {GROWN:g} {grown}, "
-                           f"{v['dev'][-1]:.1e} at k = {len(v['dev']) - 1}; re-initialised "
-                           f"every {v['reinit_every']} steps: max {v['max_reinit']:.1e}",
-                           name, "grows like ρ^k; re-initialising from the direct form every "
-                           f"{v['reinit_every']} steps ('auto') caps the growth at "
-                           f"{AUTO_GROWTH:g}× round-off")
-    s = summary(comp)
-    kf = ("KF", None)
-    best_u = s["best"]["FIR, no prior (Cor 2.2)"]
-    best_s = s["best"]["FIR, stationary prior (Cor 2.1)"]
-    ratio_u = s["worst_val"][best_u] / s["nominal"][best_u]
-    ratio_kf = s["worst_val"][kf] / s["nominal"][kf]
-    kf_best = all(comp["rmse"][c][kf][0] <= v[0] for c in CORNERS
-                  for v in comp["rmse"][c].values())
-    report.compare("Future work: FIR vs Kalman filter under paper 001's model uncertainty",
-                   None, f"worst-corner x₁ RMSE: KF {s['worst_val'][kf]:.3g}; FIR no prior "
-                   f"{s['worst_val'][best_u]:.3g} (best, L = {best_u[1]}); FIR stationary prior "
-                   f"{s['worst_val'][best_s]:.3g} (best, L = {best_s[1]})",
-                   f"CarrierMotion-v0, true Δ22, Δc at the corners, filters nominal; "
-                   f"{comp['runs']} runs",
-                   ("the KF is better at every corner and window" if kf_best else
-                    "some FIR window beats the KF at some corner (table)")
-                   + f"; worst ÷ nominal: unbiased FIR {ratio_u:.3f}, KF {ratio_kf:.3f}"
-                   + (" (the unbiased FIR degrades less, but its noise dominates)"
-                      if ratio_u < ratio_kf else ""))
-    report.add_table("Gain paths: max relative difference to path (a), the batch solution "
-                     "(paper 000 Thm 1 / (2.4))",
-                     ["L", "prior", "form", "(b) Riccati: S", "(b): P", "(c) two-stage: S",
-                      "(c): P"], rows)
-    report.add_table(f"Recursive vs direct FIR filter (L = {RECURSIVE_HORIZON})",
-                     ["example", "form", "ρ", "max dev. k < 3L", "deviation > 1e-6 after",
-                      "dev. at the end", "re-init every", "max dev. re-initialised"],
-                     [[name, form, v["rho"], v["first"],
-                       v["grown_at"] if v["grown_at"] is not None else "never",
-                       float(v["dev"][-1]), v["reinit_every"], v["max_reinit"]]
-                      for name, r in rec.items() for form, v in r.items()])
-    headers, trows = table_rows(comp)
-    report.add_table(f"Future work: x₁ RMSE on CarrierMotion-v0 with the true Δ22, Δc at "
-                     f"paper 001's corners, filters on the nominal model ({comp['runs']} runs, "
-                     f"k ≥ 250)", headers, trows)
-    report.notes += [
-        "Example system: the carrier of paper 001 §V (A = [[0, 1], [−0.36, −0.06]], noise "
-        "input [0.6, −0.036]ᵀ, q = 0.035, V = 1) sampled exactly at T = 0.1 s; R = V/T = 10, so "
-        "the deck motion (σ ≈ 0.32) is measured at an SNR of about 0.1.",
-        "Recursive form: with this low SNR the filter's poles are close to A's and ρ is just "
-        "above 1, so round-off grows slowly; the second example (T = 1 s, v = 0.01) has the "
-        "faster filter dynamics that make the recursion's reciprocal pole pairs bite.",
-        "Future work: the KF's x₁ RMSE is "
-        + ", ".join(f"{comp['rmse'][c][kf][0]:.3g} ({corner_label(c)})" for c in CORNERS)
-        + ". The unbiased FIR filter ignores the prior and pays with noise at every window "
-        "length; the stationary-prior FIR approaches the KF as the window grows. Paper 001's "
-        "uncertainty box is small against this noise level (its exact degradation is ~1e-3 of "
-        "tr R), so robustness never pays off here.",
-    ]
+    return run_plan(plan(seed, quick, runs), runner)
 
 
 def plot(report: Report, out_dir: str | Path) -> None:

@@ -25,6 +25,8 @@ import numpy as np
 from fir_gym.estimators import FIRFilter, KalmanFilter
 
 from ._montecarlo import VectorTask, chunks, run_filter, simulate_vector, stack_episodes, task_seed
+from .plan import Stage, Task, run_plan
+from .prose import say
 from .runner import Runner
 
 ENV_ID = "fir_gym/CarrierMotion-v0"
@@ -40,7 +42,7 @@ SCORE_FROM = 250
 
 def corner_label(corner: tuple[float, float]) -> str:
     d22, dc = corner
-    return "nominal" if corner == (0.0, 0.0) else f"Δ22={d22:+g}, Δc={dc:+g}"
+    return "nominal" if corner == (0.0, 0.0) else say("Δ22={a:+g}, Δc={b:+g}", a=d22, b=dc)
 
 
 def comparison_filters(model: Any, prior_cov: np.ndarray, windows: tuple[int, ...]
@@ -55,34 +57,63 @@ def comparison_filters(model: Any, prior_cov: np.ndarray, windows: tuple[int, ..
     return out
 
 
-def run_comparison(*, seed: int, quick: bool, runs: int | None, runner: Runner
-                   ) -> dict[str, Any]:
-    """x₁ and x₂ RMSE of every filter at every corner: ``rmse[corner][(family, L)] = (x₁, x₂)``."""
+def comparison_task(task: tuple[tuple[float, float], int, int, int, tuple[int, ...]]
+                    ) -> dict[tuple[str, int | None], np.ndarray]:
+    """One chunk at one corner: simulate it, run every filter; squared-error sums of x₁, x₂
+    over k ≥ :data:`SCORE_FROM` per filter (a runner task)."""
+    (d22, dc), seed, chunk, n, windows = task
+    ep = stack_episodes([simulate_vector(VectorTask(ENV_ID, task_seed(seed, 4, chunk), n, STEPS,
+                                                    {"delta22": d22, "delta_c": dc}))])
+    env = gym.make(ENV_ID)
+    model = env.unwrapped.model                            # type: ignore[attr-defined]
+    prior_cov = env.unwrapped.stationary_cov               # type: ignore[attr-defined]
+    env.close()
+    return {key: np.sum((run_filter(f, ep.Y, ep.U).x[SCORE_FROM:] - ep.X[SCORE_FROM:]) ** 2,
+                        axis=(0, 1))
+            for key, f in comparison_filters(model, prior_cov, windows).items()}
+
+
+def comparison_plan(seed: int, quick: bool, runs: int | None) -> Stage:
+    """One task per (corner, chunk of runs); then the RMSE table of :func:`run_comparison`."""
     runs = runs or RUNS[quick]
     windows = WINDOWS[quick]
-    env = gym.make(ENV_ID)
-    model, prior_cov = env.unwrapped.model, env.unwrapped.stationary_cov
-    env.close()
     sizes = chunks(runs, CHUNK)
-    tasks = [VectorTask(ENV_ID, task_seed(seed, 4, i), n, STEPS,
-                        {"delta22": d22, "delta_c": dc})
-             for d22, dc in CORNERS for i, n in enumerate(sizes)]
-    data = runner.map(simulate_vector, tasks, desc="paper 004 comparison")
-    rmse: dict[tuple[float, float], dict[tuple[str, int | None], tuple[float, float]]] = {}
-    for c, corner in enumerate(CORNERS):
-        ep = stack_episodes(data[c * len(sizes):(c + 1) * len(sizes)])
-        rmse[corner] = {}
-        for key, f in comparison_filters(model, prior_cov, windows).items():
-            e = run_filter(f, ep.Y, ep.U).x[SCORE_FROM:] - ep.X[SCORE_FROM:]
-            rmse[corner][key] = tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=(0, 1))))
-    return {"rmse": rmse, "windows": windows, "runs": runs, "dt": float(model.dt)}
+    keys = [(corner, n) for corner in CORNERS for n in sizes]
+    tasks = [Task(comparison_task, (corner, seed, i, n, windows),
+                  cost=1e-3 * n * (1 + 2 * len(windows)))
+             for corner in CORNERS for i, n in enumerate(sizes)]
+
+    def then(results: list[Any]) -> dict[str, Any]:
+        env = gym.make(ENV_ID)
+        dt = float(env.unwrapped.model.dt)                 # type: ignore[attr-defined]
+        env.close()
+        rmse: dict[tuple[float, float], dict[tuple[str, int | None], tuple[float, float]]] = {}
+        for corner in CORNERS:
+            parts = [r for (c, _), r in zip(keys, results, strict=True) if c == corner]
+            samples = runs * (STEPS + 1 - SCORE_FROM)
+            rmse[corner] = {}
+            for key in parts[0]:
+                x1, x2 = np.sqrt(sum(p[key] for p in parts) / samples)
+                rmse[corner][key] = (float(x1), float(x2))
+        return {"rmse": rmse, "windows": windows, "runs": runs, "dt": dt}
+
+    return Stage(tasks, then, desc="paper 004")
+
+
+def run_comparison(*, seed: int, quick: bool, runs: int | None, runner: Runner | None = None
+                   ) -> dict[str, Any]:
+    """x₁ and x₂ RMSE of every filter at every corner: ``rmse[corner][(family, L)] = (x₁, x₂)``."""
+    return run_plan(comparison_plan(seed, quick, runs), runner)
 
 
 def summary(res: dict[str, Any]) -> dict[str, Any]:
     """Worst corner per filter, the best FIR of each family, and the KF, for the report."""
     rmse = res["rmse"]
     keys = list(rmse[CORNERS[0]])
-    worst = {key: max(CORNERS[1:], key=lambda c, key=key: rmse[c][key][0]) for key in keys}
+    def worst_corner(key: tuple[str, int | None]) -> tuple[float, float]:
+        return max(CORNERS[1:], key=lambda c: rmse[c][key][0])
+
+    worst = {key: worst_corner(key) for key in keys}
     worst_val = {key: rmse[worst[key]][key][0] for key in keys}
     nominal = {key: rmse[CORNERS[0]][key][0] for key in keys}
     best = {}

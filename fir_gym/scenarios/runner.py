@@ -33,16 +33,25 @@ class Runner:
             ``backend="dask"`` and no address a local cluster is started (and closed
             by :meth:`close`).
         progress: show a progress bar (tqdm, when installed) per :meth:`map` call.
+        blas_threads: BLAS threads per worker task on joblib and Dask (default 1: the
+            scenarios' matrices are small, and more threads per worker only oversubscribe
+            the cores); ``None`` leaves the workers' BLAS alone.
     """
 
     def __init__(self, backend: str = "serial", *, jobs: int | None = None,
-                 scheduler: str | None = None, progress: bool = False) -> None:
+                 scheduler: str | None = None, progress: bool = False,
+                 blas_threads: int | None = 1) -> None:
         one_of("backend", backend, BACKENDS)
         if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):
             raise ValueError(f"jobs must be a positive integer or None; got {jobs!r}")
         if scheduler is not None and backend != "dask":
             raise ValueError("scheduler is an option of the dask backend")
+        if blas_threads is not None and (isinstance(blas_threads, bool)
+                                         or not isinstance(blas_threads, int) or blas_threads < 1):
+            raise ValueError(f"blas_threads must be a positive integer or None; got "
+                             f"{blas_threads!r}")
         self.backend, self.jobs, self.scheduler, self.progress = backend, jobs, scheduler, progress
+        self.blas_threads = blas_threads
         self._client: Any = None
         self._cluster: Any = None
 
@@ -54,6 +63,8 @@ class Runner:
             return []
         if self.backend == "serial" or (self.backend == "joblib" and self._n_jobs() == 1):
             return [fn(item) for item in self._bar(items, desc)]
+        if self.blas_threads is not None:
+            fn = LimitedBlas(fn, self.blas_threads)
         if self.backend == "joblib":
             from joblib import Parallel, delayed
 
@@ -115,6 +126,21 @@ class Runner:
         return tqdm(iterable, desc=desc, total=total, leave=False)
 
 
+class LimitedBlas:
+    """``fn`` run with at most ``threads`` BLAS threads (the ``fir-gym`` command runs its own
+    process with one): a picklable wrapper for the workers.
+    """
+
+    def __init__(self, fn: Callable[[Any], Any], threads: int = 1) -> None:
+        self.fn, self.threads = fn, threads
+
+    def __call__(self, item: Any) -> Any:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=self.threads, user_api="blas"):
+            return self.fn(item)
+
+
 def seeded_normals(task: tuple[int, float]) -> Any:
     """An example task: ``scale`` times three standard normals drawn from ``seed``.
 
@@ -125,6 +151,14 @@ def seeded_normals(task: tuple[int, float]) -> Any:
 
     seed, scale = task
     return scale * np.random.default_rng(seed).standard_normal(3)
+
+
+def blas_threads(_: Any = None) -> int:
+    """The largest BLAS thread count this process allows (a task for the runner's tests)."""
+    from threadpoolctl import threadpool_info
+
+    return max((int(i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"),
+               default=0)
 
 
 #: the runner used when a scenario is called without one

@@ -44,6 +44,8 @@ from .paper000_orbit import P0 as ORBIT_P0
 from .paper000_orbit import X0_FILTER
 from .paper000_oscillator import (
     CHUNK,
+    PRE_WINDOW,
+    RECOVERY_FACTOR,
     WINDOW,
     oscillator_filters,
     recovery_time,
@@ -51,8 +53,10 @@ from .paper000_oscillator import (
 from .paper000_oscillator import ENV_ID as OSC_ID
 from .paper000_oscillator import P0 as OSC_P0
 from .paper000_oscillator import X0 as OSC_X0
+from .plan import Stage, Task, run_plan
+from .prose import join, say
 from .report import Report
-from .runner import SERIAL, Runner
+from .runner import Runner
 
 PAPER_RATIO = NOMINAL_MU / TRUE_MU
 RATIOS = {False: (1.0, PAPER_RATIO, 0.98, 0.9), True: (PAPER_RATIO, 0.9)}
@@ -70,12 +74,16 @@ def orbit_cell(task: tuple[float, str, int | None, np.ndarray, np.ndarray]) -> f
     """One cell: filter ``name`` (window ``N``) with μ = ratio × true on data ``(Y, X)``."""
     ratio, name, N, Y, X = task
     env = gym.make(ORBIT_ID)
-    model = env.unwrapped.make_model(mu=ratio * TRUE_MU)
+    model = env.unwrapped.make_model(mu=ratio * TRUE_MU)   # type: ignore[attr-defined]
     env.close()
-    common = {"x0": X0_FILTER, "P0": ORBIT_P0, "nan_policy": "skip"}
-    f = {"EKF": lambda: ExtendedKalmanFilter(model, **common),
-         "UKF": lambda: UnscentedKalmanFilter(model, **common),
-         "EFIR": lambda: ExtendedFIRFilter(model, horizon=N, form="predictor", **common)}[name]()
+    common: dict[str, Any] = {"x0": X0_FILTER, "P0": ORBIT_P0, "nan_policy": "skip"}
+    f: Any
+    if name == "EKF":
+        f = ExtendedKalmanFilter(model, **common)
+    elif name == "UKF":
+        f = UnscentedKalmanFilter(model, **common)
+    else:
+        f = ExtendedFIRFilter(model, horizon=int(N or 0), form="predictor", **common)
     e = run_filter(f, Y).x[SCORE_FROM:, :, 0] - X[SCORE_FROM:, :, 0]
     return float(np.sqrt(np.mean(e * e)))
 
@@ -88,12 +96,13 @@ def recovery_cell(task: tuple[float, int, int, int, tuple[int, ...]]) -> dict[st
                                                     kwargs))
                          for i, n in enumerate(chunks(runs, CHUNK))])
     env = gym.make(OSC_ID)
-    model = env.unwrapped.model
+    model = env.unwrapped.model                      # type: ignore[attr-defined]
     env.close()
-    filters = {k: v for k, v in oscillator_filters(model, variants=False).items() if k != "EFIRF"}
+    filters = {k: v for k, v in oscillator_filters(model, variants=False).items()
+               if not k.startswith("EFIR")}
     for N in windows:
-        filters[f"EFIR N={N}"] = ExtendedFIRFilter(model, horizon=N, form="predictor", x0=OSC_X0,
-                                                   P0=OSC_P0, nan_policy="skip")
+        filters[say("EFIR N={N}", N=N)] = ExtendedFIRFilter(
+            model, horizon=N, form="predictor", x0=OSC_X0, P0=OSC_P0, nan_policy="skip")
     out = {}
     for name, f in filters.items():
         rm = rmse_per_step(run_filter(f, ep.Y, ep.U).x[..., 0] - ep.X[..., 0])
@@ -103,88 +112,119 @@ def recovery_cell(task: tuple[float, int, int, int, tuple[int, ...]]) -> dict[st
     return out
 
 
+def plan(seed: int = 0, quick: bool = False, runs: int | None = None) -> Stage:
+    """Stage 1: the orbit episodes and every recovery cell; stage 2: the orbit grid cells."""
+    K, M = ORBIT_STEPS[quick], runs or ORBIT_RUNS[quick]
+    deltas = DELTAS[quick]
+    orbit_tasks = [Task(simulate_episode, EpisodeTask(ORBIT_ID, task_seed(seed, 6, i), K),
+                        cost=1.3e-5 * K) for i in range(M)]
+    rec_tasks = [Task(recovery_cell, (d, seed, runs or OSC_RUNS[quick], OSC_STEPS[quick],
+                                      OSC_WINDOWS[quick]),
+                      cost=1.8e-5 * (runs or OSC_RUNS[quick]) * OSC_STEPS[quick])
+                 for d in deltas]
+
+    def grid(results: list[Any]) -> Stage:
+        ep = stack_episodes(results[:M])
+        rec = dict(zip(deltas, results[M:], strict=True))
+        cells = [(r, name, N) for r in RATIOS[quick]
+                 for name, N in [("EKF", None), ("UKF", None)]
+                 + [("EFIR", N) for N in ORBIT_WINDOWS[quick]]]
+
+        def assemble(vals: list[float]) -> Report:
+            report = Report("sweeps", "Beyond the papers: model mismatch × window length, and "
+                            "recovery after a temporary uncertainty")
+            report.figures.update({
+                "grid": dict(zip(cells, vals, strict=True)), "ratios": RATIOS[quick],
+                "windows": ORBIT_WINDOWS[quick], "recovery": rec, "osc_steps": OSC_STEPS[quick],
+                "orbit_runs": M, "orbit_steps": K, "sigma_v": _sigma_v()})
+            _fill(report)
+            return report
+
+        return Stage([Task(orbit_cell, (r, n, N, ep.Y, ep.X), cost=2e-4 * K * M / 10 *
+                           (3 if n == "UKF" else 1)) for r, n, N in cells], assemble,
+                     desc="sweeps")
+
+    return Stage(orbit_tasks + rec_tasks, grid, desc="sweeps")
+
+
 def run(seed: int = 0, quick: bool = False, runs: int | None = None,
         runner: Runner | None = None) -> Report:
     """Both sweeps; ``runs`` sets both Monte Carlo sizes (default 10 and 40; quick 4, 10)."""
-    runner = runner or SERIAL
-    report = Report("sweeps", "Beyond the papers: model mismatch × window length, and "
-                    "recovery after a temporary uncertainty")
-    K, M = ORBIT_STEPS[quick], runs or ORBIT_RUNS[quick]
-    ep = stack_episodes(runner.map(simulate_episode, [EpisodeTask(ORBIT_ID, task_seed(seed, 6, i),
-                                                                  K) for i in range(M)],
-                                   desc="sweeps: orbit data"))
-    cells = [(r, name, N) for r in RATIOS[quick]
-             for name, N in [("EKF", None), ("UKF", None)]
-             + [("EFIR", N) for N in ORBIT_WINDOWS[quick]]]
-    vals = runner.map(orbit_cell, [(r, n, N, ep.Y, ep.X) for r, n, N in cells],
-                      desc="sweeps: mismatch x window")
-    grid = {(r, n, N): v for (r, n, N), v in zip(cells, vals, strict=True)}
-    deltas = DELTAS[quick]
-    rec = runner.map(recovery_cell, [(d, seed, runs or OSC_RUNS[quick], OSC_STEPS[quick],
-                                      OSC_WINDOWS[quick]) for d in deltas],
-                     desc="sweeps: recovery")
-    report.figures.update({"grid": grid, "ratios": RATIOS[quick], "windows": ORBIT_WINDOWS[quick],
-                           "recovery": dict(zip(deltas, rec, strict=True)),
-                           "osc_steps": OSC_STEPS[quick], "orbit_runs": M, "orbit_steps": K,
-                           "sigma_v": float(np.sqrt(1e-3))})
-    _fill(report)
-    return report
+    return run_plan(plan(seed, quick, runs), runner)
 
 
-def _fmt(rec: int | None, steps: int) -> str:
-    return f"> {steps - WINDOW[1] - 1}" if rec is None else str(rec)
+def _sigma_v() -> float:
+    env = gym.make(ORBIT_ID)
+    sv = float(np.sqrt(env.unwrapped.params["R"][0, 0]))   # type: ignore[attr-defined]
+    env.close()
+    return sv
+
+
+def _fmt(rec: int | None, steps: int) -> Any:
+    return say("> {n}", n=steps - WINDOW[1] - 1) if rec is None else rec
 
 
 def _fill(report: Report) -> None:
     f = report.figures
     grid, ratios, windows = f["grid"], f["ratios"], f["windows"]
-    reading = (f"Orbit-v0, filters' μ = ratio × {TRUE_MU}; EFIR predictor, open-loop nominal; "
-               f"{f['orbit_runs']} runs, RMSE over k = {SCORE_FROM}..{f['orbit_steps']}")
+    s = report.summary("Model mismatch × window length (Orbit-v0)",
+                       say("Orbit-v0, the filters' μ = ratio × {t}; EFIR predictor, open-loop "
+                           "nominal; {M} runs, RMSE over k = {a}..{K}", t=TRUE_MU,
+                           M=f["orbit_runs"], a=SCORE_FROM, K=f["orbit_steps"]),
+                       {"ratio": say("μ_model / μ_true (the paper's: {m} for {t})", m=NOMINAL_MU,
+                                     t=TRUE_MU)})
     rows = []
     for r in ratios:
         efir = {N: grid[(r, "EFIR", N)] for N in windows}
-        best = min(efir, key=efir.get)
-        rows.append([f"{r:.5g}", grid[(r, "EKF", None)], grid[(r, "UKF", None)],
+        best = min(efir, key=lambda N: efir[N])
+        rows.append([say("{r:.5g}", r=r), grid[(r, "EKF", None)], grid[(r, "UKF", None)],
                      *efir.values(), best])
-        report.compare(f"Mismatch μ_model/μ_true = {r:.5g}: x₁ RMSE, EKF / UKF / best EFIR",
-                       None, f"{grid[(r, 'EKF', None)]:.3g} / {grid[(r, 'UKF', None)]:.3g} / "
-                       f"{efir[best]:.3g} (N = {best})", reading,
-                       "the papers leave it open; EFIR N = "
-                       + ", ".join(f"{N}: {v:.3g}" for N, v in efir.items()))
+        s.compare(say("x₁ RMSE, EKF / UKF / best EFIR, ratio {r:.5g}", r=r), None,
+                  say("{a:.3g} / {b:.3g} / {c:.3g} (N = {N})", a=grid[(r, "EKF", None)],
+                      b=grid[(r, "UKF", None)], c=efir[best], N=best), "ratio",
+                  "beyond the paper",
+                  say("EFIR: {e}", e=join([say("N = {N}: {v:.3g}", N=N, v=v)
+                                            for N, v in efir.items()])))
     report.add_table("Model mismatch × window length: x₁ RMSE on Orbit-v0",
-                     ["μ_model / μ_true", "EKF", "UKF", *[f"EFIR N={N}" for N in windows],
+                     ["μ_model / μ_true", "EKF", "UKF", *[say("EFIR N={N}", N=N) for N in windows],
                       "best N"], rows)
     rec, steps = f["recovery"], f["osc_steps"]
     names = list(next(iter(rec.values())))
-    rrows = [[d, *[_fmt(rec[d][n]["recovery"], steps) for n in names]] for d in rec]
-    srows = [[d, *[rec[d][n]["sum"] for n in names]] for d in rec]
+    r2 = report.summary("Recovery after a temporary uncertainty (UncertainOscillator-v0)",
+                        say("uncertainty='state', δ on k = {a}..{b}, filters on the env's model; "
+                            "steps after x[{c}] until the x₁ RMSE stays within {f:g}× its largest "
+                            "value over k = {p0}..{p1}; run to k = {K}", a=WINDOW[0],
+                            b=WINDOW[1], c=WINDOW[1] + 1, f=RECOVERY_FACTOR, p0=PRE_WINDOW[0],
+                            p1=PRE_WINDOW[1], K=steps))
     for d, res in rec.items():
-        report.compare(f"Recovery after δ = {d:g} on k = 350..400 (steps after x[401])", None,
-                       ", ".join(f"{n} {_fmt(res[n]['recovery'], steps)}" for n in names),
-                       "UncertainOscillator-v0, uncertainty='state', filters on the env's model",
-                       "a FIR filter forgets within N (predictor: N steps); the IIR filters carry "
-                       "the error in their state, the EKF/UKF also in x̂₃ (no process noise)")
-    report.add_table(f"Recovery time (steps after x[401] until the x₁ RMSE stays within 2× its "
-                     f"largest value over k = 300..349; run to k = {steps})", ["δ", *names], rrows)
-    report.add_table("Σ_k=350..400 of the x₁ RMSE (Table 1's measure) for each δ",
-                     ["δ", *names], srows)
-    sweep_eps = [grid[(r, "EKF", None)] for r in ratios]
+        r2.compare(say("recovery after δ = {d:g}", d=d), None,
+                   join([say("{n} {v}", n=n, v=_fmt(res[n]["recovery"], steps)) for n in names]),
+                   "eq29·Gp·Rvar", "beyond the paper",
+                   "a FIR filter forgets within N (predictor: N steps); the IIR filters carry the "
+                   "error in their state, the EKF/UKF also in x̂₃ (no process noise)")
+    report.add_table("Recovery time (steps)", ["δ", *names],
+                     [[d, *[_fmt(rec[d][n]["recovery"], steps) for n in names]] for d in rec])
+    report.add_table(say("Σ over k = {a}..{b} of the x₁ RMSE (Table 1's measure) for each δ",
+                         a=WINDOW[0], b=WINDOW[1]), ["δ", *names],
+                     [[d, *[rec[d][n]["sum"] for n in names]] for d in rec])
+    ekf = [grid[(r, "EKF", None)] for r in ratios]
     efir_wins = [r for r in ratios
                  if min(grid[(r, "EFIR", N)] for N in windows) < grid[(r, "EKF", None)]]
     report.notes += [
-        "Mismatch: over a window of N measurements the μ error biases the EFIR by about "
-        "δμ/r²·(N·0.01)²/2, far below the noise for N ≤ 100 even at 10 % error, so the EFIR's "
-        "RMSE falls with N like the end point of a straight-line fit, ≈ 2σ_v/√N; the EKF and "
-        "UKF (no process noise) integrate the bias instead: RMSE "
-        + " → ".join(f"{v:.2g}" for v in sweep_eps)
-        + f" over the ratios {', '.join(f'{r:.4g}' for r in ratios)}. The best EFIR beats the "
-        "EKF at the ratios " + (", ".join(f"{r:.4g}" for r in efir_wins) or "none")
-        + f" (over k ≤ {f['orbit_steps']}; the EKF's bias keeps growing with time, Fig. 1).",
-        "Recovery: the EFIR's recovery is at most N in the predictor form (its window "
-        "y[k−N..k−1] is clean from k = 401 + N; 0 means its error never left the band); LKF "
-        "recovers once the plant has settled (its "
-        "linearisation never sees the data), EKF and UKF can take far longer because the "
-        "uncertainty is absorbed into x̂₃, which has no process noise.",
+        say("Mismatch: over a window of N measurements the μ error biases the EFIR far below "
+            "the noise for these N, so its RMSE falls with N like the end point of a "
+            "straight-line fit, `≈ 2σ_v/√N`; the EKF and UKF (no process noise) integrate the "
+            "bias instead: RMSE {e} over the ratios {r}. The best EFIR beats the EKF at the "
+            "ratios {w} (over k ≤ {K}; the EKF's bias keeps growing with time, Fig. 1).",
+            e=join([say("{v:.2g}", v=v) for v in ekf], " → "),
+            r=join([say("{v:.4g}", v=v) for v in ratios]),
+            w=join([say("{v:.4g}", v=v) for v in efir_wins]) if efir_wins else "none",
+            K=f["orbit_steps"]),
+        say("Recovery: the EFIR's recovery is at most N in the predictor form (its window "
+            "`y[k−N..k−1]` is clean from k = {c} + N; a recovery of {z} means its error never left "
+            "the band); LKF recovers once the plant has settled, EKF and UKF can take far longer "
+            "because the uncertainty is absorbed into x̂₃, which has no process noise.",
+            c=WINDOW[1] + 1, z=0),
     ]
 
 

@@ -14,6 +14,7 @@ from scipy.integrate import solve_ivp
 from fir_gym.estimators.bounds import (
     corners,
     delta_pi1,
+    delta_pi1_from_start,
     delta_pi2,
     error_covariance,
     theorem21,
@@ -216,3 +217,42 @@ def test_bad_models_are_rejected():
         fir_riccati(unstable, 1.0)
     with pytest.raises(ValueError, match="horizon"):
         fir_riccati(carrier(), -1.0)
+
+
+# ---------------------------------------------------------------------------- Φ_F(τ, 0) reading
+def test_delta_pi1_from_start_against_one_ode_solve():
+    """Eq 3.2 with Φ_F(τ, 0): one DOP853 solve of both Riccati equations, the transition
+    dΦ/dσ = (A_M − K_M C_M) Φ from Φ(0) = I and the integral of the Frobenius norm as a
+    fourth component — no Hamiltonian exponential, no Simpson rule (the implementation's)."""
+    true, nominal = carrier(), carrier(q=0.045, v=0.9)
+    T = 5.0
+
+    def rhs(t, y):
+        R, R_M, Phi = y[:4].reshape(2, 2), y[4:8].reshape(2, 2), y[8:12].reshape(2, 2)
+        out = []
+        for m, P in ((true, R), (nominal, R_M)):
+            S = m.C.T @ m.R_inv @ m.C
+            out.append((m.A @ P + P @ m.A.T + m.GQGT - P @ S @ P).ravel())
+        K, K_M = R @ true.C.T @ true.R_inv, R_M @ nominal.C.T @ nominal.R_inv
+        dPhi = (nominal.A - K_M @ nominal.C) @ Phi
+        X = Phi @ (K_M - K)
+        return np.concatenate([*out, dPhi.ravel(), [np.linalg.norm(X @ X.T)]])
+
+    y0 = np.concatenate([stationary_covariance(true).ravel(),
+                         stationary_covariance(nominal).ravel(), np.eye(2).ravel(), [0.0]])
+    ref = solve_ivp(rhs, (0, T), y0, rtol=1e-11, atol=1e-14, method="DOP853").y[-1, -1]
+    assert delta_pi1_from_start(true, nominal, T) == pytest.approx(ref, rel=1e-6)
+    # the two readings differ on a window (Φ_F(T, τ) ≠ Φ_F(τ, 0)) ...
+    assert abs(delta_pi1(true, nominal, T).paper / ref - 1) > 0.05
+    # ... and coincide for the steady-state filter, where both are e^{F τ}
+    assert delta_pi1_from_start(true, nominal, None) == pytest.approx(
+        delta_pi1(true, nominal, None).paper, rel=1e-12)
+
+
+def test_from_start_is_the_product_of_the_steps_from_zero():
+    fir = fir_riccati(carrier(), 2.0, 40)
+    start, end = fir.from_start(), fir.to_end()
+    np.testing.assert_allclose(start[0], np.eye(2))
+    # Φ_F(T, σ_j) Φ_F(σ_j, 0) = Φ_F(T, 0) at every grid point
+    for j in range(len(fir.sigma)):
+        np.testing.assert_allclose(end[j] @ start[j], start[-1], rtol=1e-12, atol=1e-14)

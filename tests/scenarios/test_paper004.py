@@ -77,3 +77,23 @@ def test_plot_writes_two_figures(report, tmp_path):
     assert len(report.images) == 2
     for path in report.images.values():
         assert (tmp_path / path).stat().st_size > 10_000
+
+
+def test_counted_theorem_2_1_is_the_algorithm_and_costs_what_its_loops_say():
+    """Theorem 2.1 as printed, counted: its gains equal fir_gains (and so does the direct
+    solution), and its multiply-adds are exactly the closed form of its loops — per window
+    instant a q×q solve and O(n³ + n²q) products, plus n²q for every (j, m) pair with m > j
+    (the N² n² q term the printed q³N³ misses)."""
+    from fir_gym.scenarios import paper004_cost as cost
+
+    model = paper004.example_model()
+    res = cost.count(model, lengths=(5, 9, 17))
+    assert res["gap"] < 1e-10
+    n, q = res["n"], res["q"]
+    solve = q ** 3 // 3 + q * q * n
+    for L, counted in zip(res["L"], res["thm21"], strict=True):
+        per_step = n * n * q + q * n * q + solve + n * q * n + q * n * n + solve + 2 * n ** 3
+        extra = (L - 1) * (n * q * n + n ** 3)           # Γ(j) A_{j-1}, j ≥ 1
+        responses = L * (q * n * n + solve) + L * (L - 1) // 2 * n * n * q
+        assert counted == L * per_step + extra + responses
+    assert cost.exponent(res["L"], res["direct"]) > 2.5

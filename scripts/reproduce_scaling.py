@@ -1,0 +1,152 @@
+#!/usr/bin/env python
+"""Time ``fir-gym reproduce`` serially, on two joblib workers and on a two-worker Dask cluster.
+
+    python scripts/reproduce_scaling.py [--quick] [--cold] [--backends serial,joblib,dask]
+                                        [--out DIR] [--no-figures]
+    python scripts/reproduce_scaling.py --model [--quick] [--workers 2]
+
+Each backend runs back to back in a fresh process (``python -m fir_gym.cli reproduce``,
+imports and kernel loading included), the load average is printed before each run,
+and the speed-ups are the serial wall time over each backend's, measured in the same
+call. The REPORT.md files are compared byte for byte. ``--cold`` first deletes the
+numba cache (the ``*.nbi``/``*.nbc`` files under the installed ``fir_gym.estimators``
+and ``fir_gym.envs``), so the first run also compiles the kernels. Timings on a shared
+machine are depressed in proportion to its load: read the ratios with the load beside
+them.
+
+``--model`` measures what a loaded machine cannot: it runs every task serially in this
+process, records each one's CPU time (which the load barely changes), and schedules
+them on ``--workers`` ideal workers in the order the runner hands them out (costliest
+first, each to the first free worker, one map per stage), adding the client's own CPU
+time (imports, assembly, figures). The ratio is the speed-up an idle machine would give,
+before the workers' start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+JOBS = 2
+
+
+def clear_numba_cache() -> int:
+    """Delete the compiled-kernel cache of the installed package; the number of files."""
+    import fir_gym.envs
+    import fir_gym.estimators
+
+    removed = 0
+    for package in (fir_gym.estimators, fir_gym.envs):
+        for path in Path(package.__file__).parent.rglob("__pycache__/*.nb[ic]"):
+            path.unlink()
+            removed += 1
+    return removed
+
+
+def run(backend: str, out: Path, quick: bool, figures: bool) -> float:
+    args = [sys.executable, "-m", "fir_gym.cli", "reproduce", "--no-progress"]
+    args += ["--quick"] if quick else []
+    args += ["--out", str(out)] if figures else []
+    if backend != "serial":
+        args += ["--backend", backend, "--jobs", str(JOBS)]
+    start = time.perf_counter()
+    done = subprocess.run(args, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - start
+    if done.returncode:
+        raise SystemExit(f"{backend} failed:\n{done.stderr[-2000:]}")
+    if not figures:                                    # the text report on stdout
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "REPORT.md").write_text(done.stdout)
+    return wall
+
+
+def model(quick: bool, workers: int) -> None:
+    """Per-task CPU times, scheduled on ``workers`` ideal workers (see the module docstring)."""
+    import heapq
+    import importlib
+
+    from fir_gym.scenarios import SCENARIOS, episodes
+    from fir_gym.scenarios.plan import execute
+    from fir_gym.scenarios.runner import Runner
+
+    stages: list[list[float]] = []
+
+    class Timing(Runner):
+        def map(self, fn, items, *, desc=None):  # type: ignore[no-untyped-def]
+            out, times = [], []
+            for item in items:
+                t = time.process_time()
+                out.append(fn(item))
+                times.append(time.process_time() - t)
+            stages.append(times)
+            return out
+
+    start = time.process_time()
+    modules = [importlib.import_module(f"fir_gym.scenarios.{n}") for n in SCENARIOS]
+    plans = [episodes.plan(0)] + [m.plan(seed=0, quick=quick) for m in modules]
+    t0 = time.process_time()
+    reports = execute(plans, Timing())[1:]
+    t1 = time.process_time()
+    with tempfile.TemporaryDirectory() as tmp:
+        for m, r in zip(modules, reports, strict=True):
+            m.plot(r, tmp)
+    t2 = time.process_time()
+
+    def makespan(times: list[float]) -> float:
+        free = [0.0] * workers
+        for t in times:
+            heapq.heappush(free, heapq.heappop(free) + t)
+        return max(free)
+
+    tasks = sum(map(sum, stages))
+    client = (t0 - start) + (t1 - t0 - tasks) + (t2 - t1)
+    serial, parallel = client + tasks, client + sum(map(makespan, stages))
+    print(f"tasks {sum(map(len, stages))} in {len(stages)} stages: {tasks:.1f} s CPU; client "
+          f"(imports, assembly, figures) {client:.1f} s")
+    print(f"modelled serial {serial:.1f} s, {workers} workers {parallel:.1f} s: speed-up "
+          f"{serial / parallel:.2f}x (before the workers' start-up)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="fir-gym reproduce --quick")
+    p.add_argument("--cold", action="store_true", help="clear the numba cache first")
+    p.add_argument("--backends", default="serial,joblib,dask")
+    p.add_argument("--out", default=None, help="where the reports go (default: a temp dir)")
+    p.add_argument("--no-figures", action="store_true",
+                   help="no --out for fir-gym: time the computation and the text report only")
+    p.add_argument("--model", action="store_true",
+                   help="per-task CPU times scheduled on ideal workers (module docstring)")
+    p.add_argument("--workers", type=int, default=JOBS, help="workers of --model")
+    args = p.parse_args(argv)
+    if args.model:
+        model(args.quick, args.workers)
+        return 0
+    backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+    root = Path(args.out or tempfile.mkdtemp(prefix="fir-gym-scaling-"))
+    if args.cold:
+        print(f"cleared {clear_numba_cache()} cached kernel files")
+    walls: dict[str, float] = {}
+    for b in backends:
+        load = os.getloadavg()
+        walls[b] = run(b, root / b, args.quick, not args.no_figures)
+        print(f"{b:7s} {walls[b]:7.1f} s   (load average before: {load[0]:.2f} {load[1]:.2f} "
+              f"{load[2]:.2f} on {os.cpu_count()} CPUs)", flush=True)
+    reports = {b: (root / b / "REPORT.md").read_bytes() for b in backends}
+    same = len(set(reports.values())) == 1
+    if "serial" in walls:
+        for b in backends:
+            if b != "serial":
+                print(f"speed-up {b} ({JOBS} workers) over serial: "
+                      f"{walls['serial'] / walls[b]:.2f}x")
+    print(f"REPORT.md identical on {', '.join(backends)}: {same}   ({root})")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
