@@ -11,10 +11,10 @@ import scipy.stats
 from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearModel
 from fir_gym.estimators.kalman import (
     KalmanFilter,
-    LinearizedKalmanFilter,
     kf_predict,
     kf_update,
 )
+from fir_gym.estimators.linearized import LinearizedKalmanFilter
 from fir_gym.estimators.registry import estimator_names, make_estimator
 
 
