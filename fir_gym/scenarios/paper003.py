@@ -353,34 +353,33 @@ def run(seed: int = 0, quick: bool = False, runs: int | None = None,
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """Figs 3–5 of paper 003 (the default cell): states, parameter estimates and errors."""
+    from ..plotting import plot_estimates
     from ._plotting import new_figure, save
 
     s = report.figures["series"]
     t = s["t"]
     names = ("x (m)", "ẋ (m/s)", "θ (rad)", "θ̇ (rad/s)")
     fig, ax = new_figure(4, 1, height=1.9, sharex=True)
-    for i, a in enumerate(ax):
-        a.plot(t, s["Y"][:, i], ".", color="0.75", ms=1.5, label="measured")
-        a.plot(t, s["X"][:, i], "k--", lw=1.0, label="exact")
-        a.plot(t, s["ukf"][:, i], "C0-.", lw=1.0, label="UKF")
-        a.set_ylabel(names[i])
+    plot_estimates(t, s["ukf"][:, :4], s["X"], measurement=s["Y"], names=names, label="UKF",
+                   color="C0", axes=ax)
     ax[0].legend(fontsize=7, ncol=3)
     ax[-1].set_xlabel("t (s)")
     ax[0].set_title(f"Paper 003 Fig. 3: estimated states (run 0, {DEFAULT})")
     save(report, out_dir, "fig3_states", fig, "Paper 003 Fig. 3: estimated states")
+    truth = np.array([TRUE[p] for p in PARAMS])
     for fig_no, errors in ((4, False), (5, True)):
         fig, ax = new_figure(2, 1, height=2.4, sharex=True)
-        for j, (a, name) in enumerate(zip(ax, PARAMS, strict=True)):
-            truth = TRUE[name]
-            shift = truth if errors else 0.0
-            mean, sd = s["param_mean"][:, j] - shift, s["param_std"][:, j]
-            a.plot(t, s["ukf"][:, 4 + j] - shift, "C0-.", lw=1.0, label="UKF, run 0")
-            a.plot(t, mean, "C1", lw=1.0, label="UKF, Monte-Carlo mean ± std")
-            a.fill_between(t, mean - sd, mean + sd, color="C1", alpha=0.25)
-            a.axhline(0.0 if errors else truth, color="k", ls="--", lw=0.8,
+        shift = truth if errors else 0.0
+        labels = [f"{p} error" if errors else p for p in PARAMS]
+        # the Monte Carlo mean ± one standard deviation over the runs, then run 0
+        plot_estimates(t, s["param_mean"] - shift, covariance=s["param_std"] ** 2, sigma=1,
+                       names=labels, label="UKF, Monte-Carlo mean", color="C1", axes=ax)
+        plot_estimates(t, s["ukf"][:, 4:] - shift, names=labels, label="UKF, run 0",
+                       color="C0", axes=ax)
+        for a, name in zip(ax, PARAMS, strict=True):
+            a.axhline(0.0 if errors else TRUE[name], color="k", ls="--", lw=0.8,
                       label="zero error" if errors else "true value")
             a.set_ylim(-0.1 if errors else 0.1, 0.1 if errors else 0.3)
-            a.set_ylabel(f"{name} error" if errors else name)
         ax[0].legend(fontsize=7)
         ax[-1].set_xlabel("t (s)")
         ax[0].set_title(f"Paper 003 Fig. {fig_no}: "
