@@ -55,7 +55,7 @@ CLAIM_SHARE = 0.95
 HALF = 0.5
 DIFFERENCES = ("backward", "forward", "central")
 PARAMS = ("mu", "M0")
-#: the readings of the LSM's regression window (docs/papers.md#003-lsm): the whole record, or
+#: the readings of the LSM's regression window (docs/papers.md#003-lsm-window): the whole record, or
 #: only the Table 5 window (the samples from the cell's Table 5 scoring start ``t5`` on)
 LSM_WINDOWS = ("whole", "window")
 

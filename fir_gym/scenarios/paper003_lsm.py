@@ -1,7 +1,7 @@
 """Paper 003's least-squares baseline (LSM) in the report: Table 5's LSM rows under both
 readings of the regression window, and the errors-in-variables law that explains them.
 
-The paper does not say which samples its LSM regresses (docs/papers.md#003-lsm): the
+The paper does not say which samples its LSM regresses (docs/papers.md#003-lsm-window): the
 whole record (``0 ≤ t ≤ T``, our default), or only the Table 5 window (``t ≥ t5``, the
 cell's Table 5 scoring start — the reading ``<cell>·window``). Both are run on every
 named cell and sweep cell, each with its own rows and verdicts. The law is evaluated on
