@@ -262,7 +262,7 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
     Xm, E = np.empty((n, n_b)), np.empty((m, n_b))
     settling = regime[1] == 1
     # the state half: x⁻ and e of every system, then one finish call (a call per block of
-    # 64 passes 19 arguments each time: ~15 ns per system, half the converged KF's step)
+    # 64, 19 arguments each, cost the converged KF ~15 ns per system-step of its ~45)
     for b in range(n_b):
         ub = 0 if u.shape[0] == 1 else b
         settling = settling and valid[b] and predict[b]
