@@ -235,7 +235,7 @@ class PendulumSliderEnv(PlantEnv):
         Q: ArrayLike | None = None,
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike | None = None,
-        initial_state_cov: ArrayLike | None = "swing",   # type: ignore[assignment]
+        initial_state_cov: ArrayLike | None = "swing",
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
         width: int = 480,

@@ -1,14 +1,22 @@
-"""Saving the scenarios' figures: matplotlib without a display, PNGs recorded in the report."""
+"""Saving the scenarios' figures as PNGs recorded in the report, without touching matplotlib's
+backend.
+
+A figure here is a :class:`matplotlib.figure.Figure` on its own
+:class:`~matplotlib.backends.backend_agg.FigureCanvasAgg`: it is never registered with
+pyplot and no backend is selected (no ``matplotlib.use``), so running the reproduction in
+a notebook leaves its backend and inline plots as they were, and the figures render the
+same headless or not. Where a panel is an estimate against the truth, an error or a NEES,
+the scenarios draw it with :mod:`fir_gym.plotting` on these axes.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from .report import Report
 
@@ -16,16 +24,15 @@ FIGURE_DIR = "figures"
 
 
 def new_figure(rows: int = 1, cols: int = 1, *, width: float = 8.0, height: float = 3.0,
-               sharex: bool = False) -> tuple[Any, Any]:
+               sharex: bool = False) -> tuple[Figure, Any]:
     """A figure of ``rows × cols`` panels, ``height`` inches per row; axes always a flat array."""
-    import numpy as np
-
-    fig, axes = plt.subplots(rows, cols, figsize=(width, height * rows), sharex=sharex,
-                             squeeze=False)
+    fig = Figure(figsize=(width, height * rows))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
     return fig, np.asarray(axes).ravel()
 
 
-def save(report: Report, out_dir: str | Path, name: str, fig: Any, caption: str) -> Path:
+def save(report: Report, out_dir: str | Path, name: str, fig: Figure, caption: str) -> Path:
     """Write ``fig`` to ``out_dir/figures/paper<id>_<name>.png`` and record it in ``report.images``.
 
     A report whose id is not a paper number (``"sweeps"``) uses the id as the prefix.
@@ -38,6 +45,5 @@ def save(report: Report, out_dir: str | Path, name: str, fig: Any, caption: str)
     file = folder / f"{prefix}_{name}.png"
     fig.tight_layout()
     fig.savefig(file, dpi=110)
-    plt.close(fig)
     report.images[caption] = f"{FIGURE_DIR}/{file.name}"
     return file

@@ -50,6 +50,7 @@ def run(seed: int = 0, quick: bool = False, runs: int | None = None,
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """Fig. 1 and Fig. 2 of paper 000 as PNGs under ``out_dir``."""
+    from ..plotting import plot_errors, plot_nees
     from ._plotting import new_figure, save
 
     o = report.figures["orbit"]
@@ -59,21 +60,26 @@ def plot(report: Report, out_dir: str | Path) -> None:
     fig, ax = new_figure(3, 1, height=2.6, sharex=True)
     colours = {"EKF": "C3", orbit.PAPER_FILTER: "C0", "EFIR filter form": "C2",
                "EFIR re-anchored nominal": "C1"}
-    for name, lw in ((orbit.PAPER_FILTER, 0.5), ("EKF", 1.2)):          # the EKF on top
-        ax[0].plot(k, o["filters"][name]["e1_run0"], lw=lw, color=colours[name], label=name)
+    truth = o["truth1_run0"]
+    for name in (orbit.PAPER_FILTER, "EKF"):                          # the EKF on top
+        plot_errors(k, truth + o["filters"][name]["e1_run0"], truth, names=["x₁"], label=name,
+                    color=colours[name], axes=[ax[0]])
     sv = o["sigma_v"]
     ax[0].axhline(sv, color="k", ls=":", lw=0.8, label="±σ_v (measurement noise)")
     ax[0].axhline(-sv, color="k", ls=":", lw=0.8)
-    ax[0].set_ylabel("x₁ error, run 0")
+    ax[0].set_ylabel("x₁ error (truth − estimate), run 0")
+    ax[0].set_xlabel("")                                 # the shared k axis is labelled below
+    # the EKF's NEES with its χ² band (fir_gym.plotting), the EFIR filters' beside it
+    plot_nees(k[N:], o["filters"]["EKF"]["nees"][N:], dof=2, runs=o["runs"],
+              confidence=orbit.NEES_CONFIDENCE, label="EKF", color=colours["EKF"], ax=ax[2])
     for name in ("EFIR re-anchored nominal", "EFIR filter form", orbit.PAPER_FILTER, "EKF"):
         r, ls = o["filters"][name], ":" if "re-anchored" in name else "-"
         ax[1].semilogy(k[N:], r["rmse1"][N:], ls, lw=0.7, color=colours[name], label=name)
-        ax[2].semilogy(k[N:], r["nees"][N:], ls, lw=0.7, color=colours[name], label=name)
+        if name != "EKF":
+            ax[2].semilogy(k[N:], r["nees"][N:], ls, lw=0.7, color=colours[name], label=name)
     ax[1].semilogy(k[N:], o["filters"]["EKF"]["sd1"][N:], "--", lw=0.8, color="C3",
                    label="EKF's own σ(x₁)")
     ax[1].set_ylabel(f"x₁ RMSE ({o['runs']} runs)")
-    lo, hi = o["nees_band"]
-    ax[2].axhspan(lo, hi, color="0.85", label=f"{100 * orbit.NEES_CONFIDENCE:g} % χ² band")
     ax[2].set_ylabel("NEES (run average)")
     ax[2].set_xlabel(f"k (measurement intervals of {o['dt']:g})")
     for a in ax:

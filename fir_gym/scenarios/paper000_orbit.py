@@ -126,7 +126,7 @@ def _collect(X: np.ndarray, steps: int, runs: int, out: list[dict[str, Any]]) ->
     return {"steps": steps, "runs": runs, "sigma_v": float(np.sqrt(params["R"][0, 0])),
             "dt": dt, "substeps": int(params["substeps"]),
             "nees_band": chi2_band(2, runs, NEES_CONFIDENCE),
-            "apogee": (k_top, float(r[k_top])), "r_end": float(r[-1]),
+            "apogee": (k_top, float(r[k_top])), "r_end": float(r[-1]), "truth1_run0": r,
             "filters": dict(zip(FILTERS, out, strict=True))}
 
 

@@ -288,18 +288,20 @@ def _notes(report: Report, scores: dict[str, dict[str, Any]], n_runs: int,
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """Fig. 1 of paper 002: truth, measurements and estimates of one run."""
+    from ..plotting import plot_estimates
     from ._plotting import new_figure, save
 
     r0 = report.figures["run0"]
     t = r0["t"]
     fig, ax = new_figure(2, 1, height=3.0, sharex=True)
-    ax[0].plot(t, r0["y"], ".", color="0.7", ms=3, label="measurement (interval average)")
-    styles = {BPF: ("C0", "-"), CDEKF: ("C3", "--")}
-    for i, a in enumerate(ax):
-        a.plot(t, r0["x"][:, i], "k", lw=1.5, label="true state")
-        for name, (colour, ls) in styles.items():
-            a.plot(t, r0["estimates"][name][:, i], ls, color=colour, lw=1.0, label=name)
-        a.set_ylabel(f"x{i + 1}")
+    names = [f"x{i + 1}" for i in range(len(ax))]
+    # truth and measurement once, then each filter's estimate on the same panels
+    plot_estimates(t, r0["estimates"][BPF], r0["x"], measurement=r0["y"], names=names,
+                   label=BPF, color="C0", axes=ax)
+    ax[0].lines[0].set_label("measurement (interval average)")
+    plot_estimates(t, r0["estimates"][CDEKF], names=names, label=CDEKF, color="C3", axes=ax)
+    for a in ax:
+        a.lines[-1].set_linestyle("--")                          # the CD-EKF's line
     ax[0].set_ylim(np.nanmin(r0["x"][:, 0]) - 4, np.nanmax(r0["x"][:, 0]) + 4)
     ax[0].legend(fontsize=7)
     ax[1].set_xlabel("t (s)")

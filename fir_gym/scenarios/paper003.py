@@ -4,8 +4,9 @@ The experiment: PendulumSlider-v0 with the paper's friction term, all four state
 measured with ``R = diag([0.003, 0.03, 0.03, 0.3]²)`` at 1 kHz; the UKF (and, beside
 it, the EKF) runs on the state augmented with ``[μ, M0]`` (constant: ``Q_params = 0``),
 with ``Q = 1e-6 I``, ``P0 = I6`` and a zero initial estimate. The least-squares method
-(LSM) regresses the equations of motion on finite-difference accelerations. A Monte
-Carlo over measurement-noise seeds gives every figure as mean ± spread.
+(LSM) regresses the equations of motion on finite-difference accelerations, over the whole
+record or only the Table 5 window (:data:`LSM_WINDOWS`). A Monte Carlo over
+measurement-noise seeds gives every figure as mean ± spread.
 
 The paper gives neither the input, the initial state, the duration nor the window
 its RMSEs are taken over (docs/papers.md#003-experiment-reading). A :class:`Cell`
@@ -54,6 +55,9 @@ CLAIM_SHARE = 0.95
 HALF = 0.5
 DIFFERENCES = ("backward", "forward", "central")
 PARAMS = ("mu", "M0")
+#: the readings of the LSM's regression window (docs/papers.md#003-lsm-window): the whole record, or
+#: only the Table 5 window (the samples from the cell's Table 5 scoring start ``t5`` on)
+LSM_WINDOWS = ("whole", "window")
 
 
 @dataclass(frozen=True)
@@ -146,7 +150,7 @@ def paper_input(k: np.ndarray | int) -> np.ndarray:
 def episode(task: tuple[int, float] | tuple[int, float, Cell]) -> tuple[np.ndarray, np.ndarray]:
     """One seeded episode of a cell (default :data:`QUIET`, ``seconds`` long): ``(y, x)``,
     each ``(K+1, 4)``."""
-    seed, seconds, cell = (*task, QUIET) if len(task) == 2 else task   # type: ignore[misc]
+    seed, seconds, cell = (*task, QUIET) if len(task) == 2 else task
     env = make_env(cell)
     y0, info = env.reset(seed=seed, options={"state": [env.x_rest, 0.0, cell.theta0, 0.0]})
     ys, xs = [y0], [info["state"]]
@@ -198,12 +202,33 @@ def joint_estimates(episodes: Episodes, method: str = "ukf") -> np.ndarray:
     return np.array(out)
 
 
-def lsm_estimates(episodes: Episodes, difference: str) -> np.ndarray:
-    """LSM ``(B, 2)`` estimates of ``[μ, M0]`` per run."""
-    forces = episodes.actions[:, :, 0] * episodes.force_max
+def lsm_first_sample(start: float, difference: str) -> int:
+    """The first record sample the LSM of the equations at ``t_k ≥ start`` reads: ``k0 − 1``
+    for backward and central differences (they need ``v_{k0−1}``), ``k0`` for forward ones."""
+    k0 = round(start / DT)
+    return k0 if difference == "forward" else max(k0 - 1, 0)
+
+
+def lsm_estimates(episodes: Episodes, difference: str, start: float = 0.0) -> np.ndarray:
+    """LSM ``(B, 2)`` estimates of ``[μ, M0]`` per run, regressing the equations of motion at
+    the samples ``t_k ≥ start`` (``0``: the whole record; docs/papers.md#003-lsm)."""
+    first = lsm_first_sample(start, difference)
+    forces = episodes.actions[first:, :, 0] * episodes.force_max
     lsm = episodes.dynamics.least_squares_parameters
-    return np.array([list(lsm(episodes.Y[:, b], forces[:, b], difference).values())
+    return np.array([list(lsm(episodes.Y[first:, b], forces[:, b], difference).values())
                      for b in range(episodes.Y.shape[1])])
+
+
+def lsm_starts(cell: Cell) -> tuple[float, ...]:
+    """The starts of a cell's LSM regressions: the whole record (``0``), the cell's Table 5
+    window and the sweep scorings' Table 5 windows (:data:`LSM_WINDOWS`)."""
+    return tuple(sorted({0.0, cell.t5, *(t5 for _, t5 in SCORINGS)}))
+
+
+def rate_mean_square(X: np.ndarray, start: float = 0.0) -> float:
+    """``E[θ̇²]`` of the true states ``(K+1, B, 4)`` over the samples ``t_k ≥ start`` (from
+    sample 1: the first backward-difference equation), NaN after a run left the rail."""
+    return float(np.nanmean(X[max(round(start / DT), 1):, :, 3] ** 2))
 
 
 def settle_index(err: np.ndarray, within: float = WITHIN) -> np.ndarray:
@@ -228,7 +253,7 @@ def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[s
 
     ``task = (cells, seed, chunk, n, with_ekf)``: ``n`` episodes per cell from seed
     ``seed + chunk·CHUNK`` on, the UKF (and with ``with_ekf`` the EKF and run 0's series)
-    on all of them at once, the LSM per run.
+    on all of them at once, the LSM per run and regression window (:func:`lsm_starts`).
     """
     cells, seed, chunk, n, with_ekf = task
     seeds = range(seed + chunk * CHUNK, seed + chunk * CHUNK + n)
@@ -243,8 +268,9 @@ def cell_task(task: tuple[tuple[Cell, ...], int, int, int, bool]) -> list[dict[s
         X, Y = ep.X[:, runs], ep.Y[:, runs]
         res: dict[str, Any] = {"n": n, "meas_sse": np.nansum((Y - X) ** 2, axis=0),
                                "samples": np.isfinite(Y[..., 0]).sum(axis=0),
-                               "rate_ms": float(np.nanmean(X[1:, :, 3] ** 2)),
-                               "lsm": {d: lsm_estimates(part, d) for d in DIFFERENCES}
+                               "rate_ms": {s: rate_mean_square(X, s) for s in lsm_starts(cell)},
+                               "lsm": {s: {d: lsm_estimates(part, d, s) for d in DIFFERENCES}
+                                       for s in lsm_starts(cell)}
                                if np.isfinite(Y).all() else None}
         for method, e_all in est.items():
             e = e_all[:, runs]
@@ -327,34 +353,33 @@ def run(seed: int = 0, quick: bool = False, runs: int | None = None,
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """Figs 3–5 of paper 003 (the default cell): states, parameter estimates and errors."""
+    from ..plotting import plot_estimates
     from ._plotting import new_figure, save
 
     s = report.figures["series"]
     t = s["t"]
     names = ("x (m)", "ẋ (m/s)", "θ (rad)", "θ̇ (rad/s)")
     fig, ax = new_figure(4, 1, height=1.9, sharex=True)
-    for i, a in enumerate(ax):
-        a.plot(t, s["Y"][:, i], ".", color="0.75", ms=1.5, label="measured")
-        a.plot(t, s["X"][:, i], "k--", lw=1.0, label="exact")
-        a.plot(t, s["ukf"][:, i], "C0-.", lw=1.0, label="UKF")
-        a.set_ylabel(names[i])
+    plot_estimates(t, s["ukf"][:, :4], s["X"], measurement=s["Y"], names=names, label="UKF",
+                   color="C0", axes=ax)
     ax[0].legend(fontsize=7, ncol=3)
     ax[-1].set_xlabel("t (s)")
     ax[0].set_title(f"Paper 003 Fig. 3: estimated states (run 0, {DEFAULT})")
     save(report, out_dir, "fig3_states", fig, "Paper 003 Fig. 3: estimated states")
+    truth = np.array([TRUE[p] for p in PARAMS])
     for fig_no, errors in ((4, False), (5, True)):
         fig, ax = new_figure(2, 1, height=2.4, sharex=True)
-        for j, (a, name) in enumerate(zip(ax, PARAMS, strict=True)):
-            truth = TRUE[name]
-            shift = truth if errors else 0.0
-            mean, sd = s["param_mean"][:, j] - shift, s["param_std"][:, j]
-            a.plot(t, s["ukf"][:, 4 + j] - shift, "C0-.", lw=1.0, label="UKF, run 0")
-            a.plot(t, mean, "C1", lw=1.0, label="UKF, Monte-Carlo mean ± std")
-            a.fill_between(t, mean - sd, mean + sd, color="C1", alpha=0.25)
-            a.axhline(0.0 if errors else truth, color="k", ls="--", lw=0.8,
+        shift = truth if errors else 0.0
+        labels = [f"{p} error" if errors else p for p in PARAMS]
+        # the Monte Carlo mean ± one standard deviation over the runs, then run 0
+        plot_estimates(t, s["param_mean"] - shift, covariance=s["param_std"] ** 2, sigma=1,
+                       names=labels, label="UKF, Monte-Carlo mean", color="C1", axes=ax)
+        plot_estimates(t, s["ukf"][:, 4:] - shift, names=labels, label="UKF, run 0",
+                       color="C0", axes=ax)
+        for a, name in zip(ax, PARAMS, strict=True):
+            a.axhline(0.0 if errors else TRUE[name], color="k", ls="--", lw=0.8,
                       label="zero error" if errors else "true value")
             a.set_ylim(-0.1 if errors else 0.1, 0.1 if errors else 0.3)
-            a.set_ylabel(f"{name} error" if errors else name)
         ax[0].legend(fontsize=7)
         ax[-1].set_xlabel("t (s)")
         ax[0].set_title(f"Paper 003 Fig. {fig_no}: "

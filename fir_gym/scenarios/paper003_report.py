@@ -6,7 +6,8 @@ a mean's the runs' standard deviation over √M. The claims ("the estimated para
 are within 3 %", "they converge within 100 samples") are judged on the Monte Carlo mean
 *and* per run (the paper shows one run): per run, the claim holds when at least
 :data:`~.paper003.CLAIM_SHARE` of the runs meet it (docs/papers.md#003-claims). The LSM's
-bias law: docs/papers.md#003-lsm.
+rows under both readings of its regression window, and its bias law: :mod:`.paper003_lsm`
+(docs/papers.md#003-lsm).
 """
 
 from __future__ import annotations
@@ -15,13 +16,14 @@ from typing import Any
 
 import numpy as np
 
+from . import paper003_lsm as lsm
 from .paper003 import (
     CLAIM_SHARE,
     CONVERGED_BY,
     DEFAULT,
-    DIFFERENCES,
     DT,
     HALF,
+    LSM_WINDOWS,
     PAPER_TABLE4,
     PAPER_TABLE5,
     PARAMS,
@@ -62,10 +64,12 @@ def scores(parts: list[dict[str, Any]], cell: Cell) -> dict[str, Any]:
     out: dict[str, Any] = {"runs": M, "cell": cell}
     out["meas"] = np.sqrt(np.concatenate([p["meas_sse"] for p in parts]).sum(axis=0)
                           / _cat(parts, "samples").sum())
-    out["rate_ms"] = float(np.mean([p["rate_ms"] for p in parts]))
-    lsm = [p["lsm"] for p in parts]
-    out["lsm"] = None if any(v is None for v in lsm) else {
-        d: np.concatenate([v[d] for v in lsm]) - TRUTH for d in DIFFERENCES}
+    out["rate_ms"] = {s: float(np.mean([p["rate_ms"][s] for p in parts]))
+                      for s in parts[0]["rate_ms"]}
+    fits = [p["lsm"] for p in parts]
+    out["lsm"] = None if any(v is None for v in fits) else {
+        s: {d: np.concatenate([v[s][d] for v in fits]) - TRUTH for d in fits[0][s]}
+        for s in fits[0]}
     for method in ("ukf", "ekf"):
         if method not in parts[0]:
             continue
@@ -120,6 +124,7 @@ def assemble(merged: dict[tuple[str, Cell], list[Any]], n_main: int, n_sweep: in
     _table5(report, named, swept, setup, legend)
     _claims(report, named, setup, legend)
     _sweep_table(report, swept)
+    lsm.sweep_table(report, swept)
     _notes(report, named, swept)
     _figures(report, named)
     return report
@@ -145,10 +150,15 @@ def _best(swept: dict[Cell, dict[str, Any]], paper: float, value: Any) -> tuple[
     return v, c, scoring, lo, hi
 
 
-def _best_row(s: Any, quantity: str, paper: Any, best: tuple[Any, ...]) -> None:
+def _best_row(s: Any, quantity: str, paper: Any, best: tuple[Any, ...],
+              lsm_window: str | None = None) -> None:
+    """The sweep's nearest row; ``lsm_window`` (an LSM row) names its regression window."""
     (v, se), c, (t4, t5), lo, hi = best
-    label = say("sweep best: {c} from {t:g} s", c=c.label, t=t4 if "Table 4" in quantity else t5)
-    s.compare(quantity, paper, v, say("{c}", c=c.label),
+    start = t4 if "Table 4" in quantity else t5
+    where = say("from {t:g} s", t=start) if lsm_window != "whole" else "whole record"
+    label = say("sweep best: {c} {w}", c=c.label, w=where)
+    s.compare(quantity, paper, v, say("{c}", c=c.label) if lsm_window is None
+              else lsm.reading(c.label, lsm_window),
               number_verdict(paper, v, se=se, reading=label, otherwise="ambiguous"),
               say("the sweep cell nearest the paper's number; the sweep spans {lo:.3g} to "
                   "{hi:.3g}, which {br} it", lo=lo, hi=hi,
@@ -195,7 +205,9 @@ def _table4(report: Report, named: dict[str, Any], swept: dict[Cell, Any], setup
 
 def _table5(report: Report, named: dict[str, Any], swept: dict[Cell, Any], setup: str,
             legend: dict[str, str]) -> None:
-    s = report.summary("Table 5: parameter errors (UKF RMSE; LSM error)", setup, legend)
+    s = report.summary("Table 5: parameter errors (UKF RMSE; LSM error)", setup, {
+        **legend, "X·window": "the LSM of cell X regressing only its Table 5 window (the samples "
+        "from the Table 5 start on) instead of the whole record"})
     for j, p in enumerate(PARAMS):
         paper = PAPER_TABLE5["UKF"][p]
         _ukf_rows(s, say("Table 5: UKF RMSE, {p}", p=p), paper, named, swept, "param", j,
@@ -205,64 +217,11 @@ def _table5(report: Report, named: dict[str, Any], swept: dict[Cell, Any], setup
         paper = PAPER_TABLE5["LSM"][p]
         quantity = say("Table 5: LSM error (backward differences), {p}", p=p)
         for name, sc in named.items():
-            if sc["lsm"] is None:
-                s.compare(quantity, paper, "left the rail", name, "not reproduced: differs",
-                          "the slider left the rail in some run: no regression")
-                continue
-            err = sc["lsm"]["backward"][:, j]
-            se = float(np.std(err, ddof=1) / np.sqrt(len(err)))
-            s.compare(quantity, paper, float(err.mean()), name,
-                      number_verdict(paper, err.mean(), se=se, reading=_reading(name),
-                                     otherwise="ambiguous"),
-                      _lsm_note(sc, j))
-        _best_row(s, quantity, paper, _best(
-            swept, float(paper), lambda sc, sg, j=j: None if sc["lsm"] is None else (
-                float(sc["lsm"]["backward"][:, j].mean()),
-                float(np.std(sc["lsm"]["backward"][:, j], ddof=1)
-                      / np.sqrt(len(sc["lsm"]["backward"]))))))
-
-
-def _lsm_note(sc: dict[str, Any], j: int) -> str:
-    if PARAMS[j] == "mu":
-        return say("± {s:.3f} over the runs; central differences: {c:+.4f}",
-                   s=float(np.std(sc["lsm"]["backward"][:, j])),
-                   c=float(sc["lsm"]["central"][:, j].mean()))
-    return say("errors-in-variables: the law gives {law:+.3f} for this trajectory's E[θ̇²] = "
-               "{e:.3g}; central differences: {c:+.4f}", law=bias_law(sc), e=sc["rate_ms"],
-               c=float(sc["lsm"]["central"][:, j].mean()))
-
-
-def hinge_inertia(cell: Cell) -> float:
-    """``J`` of the cell's equations (``I_c + m2 l²``; printed: ``I_c + m1 l²``)."""
-    env = make_env(cell)
-    J = float(env.dynamics.hinge_inertia)
-    env.close()
-    return J
-
-
-def measurement_variance(cell: Cell) -> float:
-    env = make_env(cell)
-    v = float(env.params["R"][3, 3])
-    env.close()
-    return v
-
-
-def bias_law(sc: dict[str, Any]) -> float:
-    """The errors-in-variables bias of the backward-difference LSM estimate of M0.
-
-    With measured ``θ̇ = θ̇_true + n`` (variance ``σ²``), the regression
-    ``M0 θ̇ = ... − J (θ̇_k − θ̇_{k−1}) / dt`` correlates its regressor with its target
-    through ``n_k``: ``E[M0_hat] ≈ (M0 E[θ̇²] − J σ²/dt) / (E[θ̇²] + σ²)``.
-    """
-    J, s2 = hinge_inertia(sc["cell"]), measurement_variance(sc["cell"])
-    E = sc["rate_ms"]
-    return (TRUE["M0"] * E - J * s2 / DT) / (E + s2) - TRUE["M0"]
-
-
-def energy_for_bias(bias: float, cell: Cell) -> float:
-    """Solve the bias law for ``E[θ̇²]``: ``(M0 E − J σ²/dt)/(E + σ²) = M0 + bias``."""
-    J, s2 = hinge_inertia(cell), measurement_variance(cell)
-    return (J * s2 / DT + (TRUE["M0"] + bias) * s2) / (-bias)
+            for window in LSM_WINDOWS:
+                lsm.row(s, quantity, paper, name, sc, j, window)
+        for window in LSM_WINDOWS:
+            _best_row(s, quantity, paper, _best(swept, float(paper), lsm.sweep_value(j, window)),
+                      lsm_window=window)
 
 
 def _claims(report: Report, named: dict[str, Any], setup: str, legend: dict[str, str]) -> None:
@@ -306,28 +265,24 @@ def _sweep_table(report: Report, swept: dict[Cell, dict[str, Any]]) -> None:
     for c, sc in swept.items():
         for t4, t5 in SCORINGS:
             u = sc["ukf"]
-            lsm = sc["lsm"]
             rows.append([c.amplitude, c.frequency, c.theta0, c.seconds,
                          say("{a:g} / {b:g}", a=t4, b=t5),
                          *[float(v) for v in u[("state", t4)][0]],
                          *[float(v) for v in u[("param", t5)][0]],
-                         *([float(lsm["backward"][:, j].mean()) for j in range(2)]
-                           if lsm is not None else [None, None]),
                          100 * u["runs_within"], 100 * u["runs_at_both"],
                          100 * u["runs_converged"]])
     paper = ["", "", "", "", "paper", *[PAPER_TABLE4[s][0] for s in STATES],
-             *[PAPER_TABLE5["UKF"][p] for p in PARAMS], *[PAPER_TABLE5["LSM"][p] for p in PARAMS],
-             "", "", ""]
+             *[PAPER_TABLE5["UKF"][p] for p in PARAMS], "", "", ""]
     report.add_table(
         "Sensitivity of Tables 4 and 5 to the settings the paper does not give",
-        ["A (N)", "f (Hz)", "θ₀", "T (s)", "from (s)", *STATES, "μ UKF", "M0 UKF", "μ LSM",
-         "M0 LSM", say("% in {p:.0f} %", p=100 * WITHIN), say("% at {t:g} s", t=CONVERGED_BY),
+        ["A (N)", "f (Hz)", "θ₀", "T (s)", "from (s)", *STATES, "μ UKF", "M0 UKF",
+         say("% in {p:.0f} %", p=100 * WITHIN), say("% at {t:g} s", t=CONVERGED_BY),
          say("% from {t:g} s", t=CONVERGED_BY)],
         [paper, *rows],
         setup=say("physical equations, `U = A sin(2πft)` N from `[x_rest, 0, θ₀, 0]`, {r} runs per "
                   "cell (by duration); 'from': the "
-                  "start of the Table 4 / Table 5 windows; UKF RMSEs and the backward LSM's mean "
-                  "errors; the last three columns: runs with both parameters within {p:.0f} % at "
+                  "start of the Table 4 / Table 5 windows; UKF RMSEs (the LSM: the next table); "
+                  "the last three columns: runs with both parameters within {p:.0f} % at "
                   "the end, at {t:g} s, and from {t:g} s on", p=100 * WITHIN, t=CONVERGED_BY,
                   r=join([say("{m} ({t:g} s)", m=m, t=t) for t, m in sorted(
                       {c.seconds: sc["runs"] for c, sc in swept.items()}.items())], ", ")))
@@ -338,9 +293,10 @@ def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> Non
     m0 = PARAMS.index("M0")
     ratio = {n: float(sc["ukf"][("param", sc["cell"].t5)][0][m0]
                       / float(PAPER_TABLE5["UKF"]["M0"])) for n, sc in named.items()}
-    lsm_m0 = {n: None if sc["lsm"] is None else float(sc["lsm"]["backward"][:, m0].mean())
+    lsm_m0 = {n: None if sc["lsm"] is None else float(sc["lsm"][0.0]["backward"][:, m0].mean())
               for n, sc in named.items()}
-    E_paper = energy_for_bias(float(PAPER_TABLE5["LSM"]["M0"]), q["cell"])
+    lsm_win = lsm.errors(lv, lsm.start_of(lv["cell"], "window"))
+    E_paper = lsm.energy_for_bias(float(PAPER_TABLE5["LSM"]["M0"]), q["cell"])
     spread = float(np.std(q["ukf"]["half"][:, m0]) / TRUE["M0"])
     n4 = sum(agrees(PAPER_TABLE4[s][0], v, se=e) for sc in swept.values()
              for sg in SCORINGS for s, v, e in zip(STATES, *sc["ukf"][("state", sg[0])],
@@ -354,12 +310,16 @@ def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> Non
     report.notes += [
         say("Table 5, UKF M0: our RMSE is {a:.2g}× the paper's {p} on the quiet trajectory and "
             "{b:.2g}× on the lively one, where the LSM's backward-difference M0 error is "
-            "{l:+.3f} (paper {lp}). The trajectory that explains the paper's LSM figure (E[θ̇²] "
-            "≈ {E:.1f} rad²/s² by the errors-in-variables law; ours: {eq:.2f} quiet, {el:.2f} "
-            "lively). {verdict}",
+            "{l:+.3f} over the whole record and {lw:+.3f} over its Table 5 window t ≥ {t:g} s "
+            "(paper {lp}). By the errors-in-variables law the paper's LSM figure needs a "
+            "trajectory with E[θ̇²] ≈ {E:.1f} rad²/s² (ours over the whole record: {eq:.2f} "
+            "quiet, {el:.2f} lively). {verdict}",
             a=ratio[DEFAULT], p=PAPER_TABLE5["UKF"]["M0"], b=ratio["lively"],
             l=lsm_m0["lively"] if lsm_m0["lively"] is not None else float("nan"),
-            lp=PAPER_TABLE5["LSM"]["M0"], E=E_paper, eq=q["rate_ms"], el=lv["rate_ms"],
+            lw=float("nan") if lsm_win is None else float(lsm_win[:, m0].mean()),
+            t=lsm.start_of(lv["cell"], "window"),
+            lp=PAPER_TABLE5["LSM"]["M0"], E=E_paper, eq=q["rate_ms"][0.0],
+            el=lv["rate_ms"][0.0],
             verdict="The lively trajectory brings both Table 5 M0 entries nearer the paper's: "
             "they are consistent with one livelier experiment than our default." if lively_closer
             else "The lively trajectory does not bring both Table 5 M0 entries nearer the "
@@ -369,16 +329,23 @@ def _notes(report: Report, named: dict[str, Any], swept: dict[Cell, Any]) -> Non
             "test_augment.py). In the sweep, {n} of its {m} Table 4 entries agree with the "
             "paper's within tolerance: the unreported settings decide the match.",
             s=100 * spread, n=n4, m=m4, h=HALF),
+        lsm.window_note(named, "lively"),
         say("LSM: central differences remove the correlation of regressor and target; what "
             "remains is the errors-in-variables attenuation `−M0 σ²/(E[θ̇²] + σ²)` = {a:+.4f} "
-            "on the quiet trajectory.",
-            a=-TRUE["M0"] * measurement_variance(q["cell"]) / (q["rate_ms"]
-                                                             + measurement_variance(q["cell"]))),
+            "on the quiet trajectory over the whole record and {aw:+.4f} over t ≥ {t:g} s "
+            "(the central-difference regression: {c:+.4f} and {cw:+.4f}).",
+            a=lsm.attenuation(q), aw=lsm.attenuation(q, q["cell"].t5), t=q["cell"].t5,
+            c=_central_m0(q, 0.0), cw=_central_m0(q, q["cell"].t5)),
         say("Printed equations (eq15·…, eq5·…): plant and filters integrate the printed ODE "
             "(PendulumSlider-v0's dynamics option; unphysical, eq 5 creates energy); the UKF's "
             "M0 RMSE is {a:.2g}× (eq 15) and {b:.2g}× (eq 5) the paper's on the quiet "
             "trajectory.", a=ratio["eq15·quiet"], b=ratio["eq5·quiet"]),
     ]
+
+
+def _central_m0(sc: dict[str, Any], start: float) -> float:
+    err = lsm.errors(sc, start, "central")
+    return float("nan") if err is None else float(err[:, PARAMS.index("M0")].mean())
 
 
 def _figures(report: Report, named: dict[str, Any]) -> None:
@@ -390,8 +357,8 @@ def _figures(report: Report, named: dict[str, Any]) -> None:
         "state_rmse": {m: q[m][("state", q["cell"].t4)][0] for m in ("ukf", "ekf")},
         "measurement_rmse": q["meas"],
         "params_at_half_second": {m: q[m]["half"] for m in ("ukf", "ekf")},
-        "lsm": {d: v + TRUTH for d, v in q["lsm"].items()},
-        "backward_bias_law": bias_law(q), "rate_ms": q["rate_ms"],
+        "lsm": {d: v + TRUTH for d, v in q["lsm"][0.0].items()},
+        "backward_bias_law": lsm.bias_law(q), "rate_ms": q["rate_ms"][0.0],
         "series": {"t": DT * np.arange(K1), "X": q["series"]["X"], "Y": q["series"]["Y"],
                    "ukf": u["run0"], "param_mean": u["mean"] + TRUTH, "param_std": u["std"]},
     })

@@ -32,7 +32,7 @@ def load(algo: str, path: str | Path | None = None) -> dict[str, Any]:
         if algo not in FILES:
             raise ValueError(f"algo must be one of {sorted(FILES)}; got {algo!r}")
         text = resources.files("fir_gym.training").joinpath(
-            "hyperparams", FILES[algo] + ".yml").read_text(encoding="utf-8")
+            "hyperparams").joinpath(FILES[algo] + ".yml").read_text(encoding="utf-8")
     else:
         text = Path(path).read_text(encoding="utf-8")
     data = yaml.safe_load(text) or {}

@@ -4,8 +4,9 @@ mean readings of its claims, and the LSM's errors-in-variables bias against its 
 import numpy as np
 import pytest
 
-from fir_gym.scenarios import paper003, paper003_report
+from fir_gym.scenarios import paper003, paper003_lsm
 from fir_gym.scenarios.paper003 import CELLS, CONVERGED_BY, DT, WITHIN, settle_index
+from fir_gym.scenarios.report import number_verdict
 
 
 @pytest.fixture(scope="module")
@@ -54,18 +55,117 @@ def test_livelier_trajectory_brings_the_lsm_bias_to_the_law(report):
     livelier trajectory (larger E[θ̇²]) has the smaller bias, as the law says."""
     cells = report.figures["cells"]
     lv, q = cells["lively"], cells["quiet"]
-    bias = lv["lsm"]["backward"][:, 1].mean()
-    assert bias == pytest.approx(paper003_report.bias_law(lv), rel=0.05)
-    assert lv["rate_ms"] > q["rate_ms"]
-    assert abs(bias) < abs(q["lsm"]["backward"][:, 1].mean())
+    bias = lv["lsm"][0.0]["backward"][:, 1].mean()
+    assert bias == pytest.approx(paper003_lsm.bias_law(lv), rel=0.05)
+    assert lv["rate_ms"][0.0] > q["rate_ms"][0.0]
+    assert abs(bias) < abs(q["lsm"][0.0]["backward"][:, 1].mean())
 
 
 def test_energy_for_bias_inverts_the_law():
     cell = CELLS["quiet"]
     for bias in (-0.7251, -0.2):
-        E = paper003_report.energy_for_bias(bias, cell)
-        sc = {"cell": cell, "rate_ms": E}
-        assert paper003_report.bias_law(sc) == pytest.approx(bias, rel=1e-12)
+        E = paper003_lsm.energy_for_bias(bias, cell)
+        assert paper003_lsm.law(E, cell) == pytest.approx(bias, rel=1e-12)
+
+
+def _regression_on_window(y, forces, start, difference, d):
+    """Paper 003's LSM written out from the Lagrangian of the physical plant, with numpy's
+    lstsq on the equations at the samples t_k ≥ start (backward or central differences)."""
+    k = np.arange(len(y))
+    if difference == "backward":
+        rows = k[(k >= 1) & (k * DT >= start - DT / 2)]
+        acc = (y[rows] - y[rows - 1]) / DT
+        force = forces[rows - 1]
+    else:
+        rows = k[(k >= 1) & (k <= len(y) - 2) & (k * DT >= start - DT / 2)]
+        acc = (y[rows + 1] - y[rows - 1]) / (2 * DT)
+        force = 0.5 * (forces[rows - 1] + forces[rows])
+    x, th, w = y[rows, 0], y[rows, 2], y[rows, 3]
+    xdd, thdd = acc[:, 1], acc[:, 3]
+    m, ml = d.m1 + d.m2, d.m2 * d.l
+    # (m1+m2)ẍ − m2 l cosθ θ̈ + m2 l sinθ θ̇² + 2k(x − l0) = U − μ N
+    normal = m * d.g + ml * (np.cos(th) * w**2 + np.sin(th) * thdd)
+    target_mu = force - 2 * d.k * (x - d.l0) - ml * np.sin(th) * w**2 - m * xdd \
+        + ml * np.cos(th) * thdd
+    # (I_c + m2 l²) θ̈ − m2 l cosθ ẍ + m2 g l sinθ = −M0 θ̇
+    target_m0 = -ml * d.g * np.sin(th) - (d.I_c + ml * d.l) * thdd + ml * np.cos(th) * xdd
+    mu = np.linalg.lstsq(normal[:, None], target_mu, rcond=None)[0][0]
+    m0 = np.linalg.lstsq(w[:, None], target_m0, rcond=None)[0][0]
+    return np.array([mu, m0])
+
+
+def test_lsm_window_reading_is_the_regression_on_the_window(report):
+    """The report's LSM of the lively cell, over the whole record and over its Table 5 window
+    (t ≥ t5), equals a regression written out here and solved by numpy's lstsq on the same
+    runs (re-simulated from their seeds) and samples; the two windows differ."""
+    lv = report.figures["cells"]["lively"]
+    cell = lv["cell"]
+    assert cell.t5 > 0
+    env = paper003.make_env(cell)
+    d, fmax = env.dynamics, env.params["force_max"]
+    env.close()
+    forces = paper003.cell_input(np.arange(cell.steps), cell, fmax) * fmax
+    for run in range(lv["runs"]):
+        y, _ = paper003.episode((run, cell.seconds, cell))           # seed 0 + run, chunk 0
+        got = {}
+        for start in (0.0, cell.t5):
+            for difference in ("backward", "central"):
+                ours = lv["lsm"][start][difference][run] + 0.2
+                want = _regression_on_window(y, forces, start, difference, d)
+                np.testing.assert_allclose(ours, want, rtol=1e-9, atol=1e-12)
+                got[(start, difference)] = want
+        # the window is another regression: it drops a tenth of the record
+        assert abs(got[(cell.t5, "backward")][1] - got[(0.0, "backward")][1]) > 1e-3
+
+
+def test_lsm_window_follows_the_bias_law_on_its_own_samples(report):
+    """On the lively cell the backward M0 error over the Table 5 window is the law evaluated
+    with E[θ̇²] over the same samples, and the law predicts the change from the whole record;
+    E[θ̇²] over the window is recomputed here from the true states."""
+    lv = report.figures["cells"]["lively"]
+    cell = lv["cell"]
+    k0 = round(cell.t5 / DT)
+    theta_dot = np.array([paper003.episode((run, cell.seconds, cell))[1][:, 3]
+                          for run in range(lv["runs"])])
+    assert lv["rate_ms"][cell.t5] == pytest.approx(np.mean(theta_dot[:, k0:] ** 2), rel=1e-12)
+    assert lv["rate_ms"][0.0] == pytest.approx(np.mean(theta_dot[:, 1:] ** 2), rel=1e-12)
+    whole = lv["lsm"][0.0]["backward"][:, 1].mean()
+    window = lv["lsm"][cell.t5]["backward"][:, 1].mean()
+    law0, law1 = paper003_lsm.bias_law(lv, 0.0), paper003_lsm.bias_law(lv, cell.t5)
+    assert window == pytest.approx(law1, rel=0.05)
+    # the regressions share 90 % of their samples and noise, so their difference is sharp
+    assert np.sign(window - whole) == np.sign(law1 - law0)
+    assert window - whole == pytest.approx(law1 - law0, rel=0.5)
+    note = next(n for n in report.notes if n.startswith("LSM window (lively)"))
+    assert note.values["r1"] == pytest.approx(window) and note.values["l1"] == law1
+
+
+def test_lsm_window_rows_and_sweep_table(report):
+    """Every named cell has Table 5 LSM rows under both windows, their verdicts from their own
+    numbers; the LSM sweep table has a row per sweep cell and regression start."""
+    rows = {(c.quantity, c.reading): c for c in report.comparisons}
+    for j, p in enumerate(paper003.PARAMS):
+        quantity = f"Table 5: LSM error (backward differences), {p}"
+        paper = paper003.PAPER_TABLE5["LSM"][p]
+        for name, sc in report.figures["cells"].items():
+            for window, start in (("whole", 0.0), ("window", sc["cell"].t5)):
+                row = rows[(quantity, name if window == "whole" else f"{name}·window")]
+                if sc["lsm"] is None:
+                    assert row.verdict == "not reproduced: differs"
+                    continue
+                err = sc["lsm"][start]["backward"][:, j]
+                assert row.ours == pytest.approx(err.mean())
+                reading = None if (name, window) == ("quiet", "whole") else row.reading
+                assert row.verdict == number_verdict(
+                    paper, err.mean(), se=np.std(err, ddof=1) / np.sqrt(len(err)),
+                    reading=reading, otherwise="ambiguous")
+        # the sweep's nearest cell under each window (sweep cells are named A…·f…·θ…·T…)
+        best = [c for c in report.comparisons if c.quantity == quantity
+                and c.reading.startswith("A")]
+        assert len(best) == 2 and best[1].reading.endswith("·window")
+    (table,) = [t for t in report.tables if t.title.startswith("The LSM")]
+    starts = {0.0, *(t5 for _, t5 in paper003.SCORINGS)}
+    assert len(table.rows) == 1 + len(paper003.sweep(True)) * len(starts)
 
 
 def test_settle_index_against_a_direct_scan():

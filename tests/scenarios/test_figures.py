@@ -1,0 +1,57 @@
+"""The scenarios' figures leave matplotlib's backend alone: importing fir_gym.scenarios (every
+scenario module) and drawing a reproduction's figures neither calls ``matplotlib.use`` nor
+changes the session's backend, and registers no pyplot figure (a notebook's inline plots
+stay as they were)."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fir_gym.scenarios import SCENARIOS
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_importing_the_scenarios_and_drawing_leaves_the_backend(tmp_path):
+    """In a fresh interpreter whose backend is svg (so a switch to Agg would show) and whose
+    ``matplotlib.use`` raises: import every scenario module, run paper 002's quick experiment
+    and write its figure."""
+    code = f"""
+import importlib, sys
+import matplotlib
+matplotlib.use("svg")
+def refuse(*args, **kwargs):
+    raise AssertionError("matplotlib.use was called")
+matplotlib.use = refuse
+import fir_gym.scenarios
+for name in {list(SCENARIOS)!r} + ["_plotting", "paper003_lsm"]:
+    importlib.import_module("fir_gym.scenarios." + name)
+from fir_gym.scenarios import paper002
+report = paper002.run(quick=True, runs=2)
+paper002.plot(report, {str(tmp_path)!r})
+assert report.images, "no figure written"
+pyplot = sys.modules.get("matplotlib.pyplot")
+print(matplotlib.get_backend(), 0 if pyplot is None else len(pyplot.get_fignums()))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=tmp_path)                 # the installed fir_gym, not the source
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["svg", "0"]
+    assert (tmp_path / "figures" / "paper002_fig1_vdp.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "fir_gym" / "scenarios").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_no_scenario_module_selects_a_backend(path):
+    """No ``matplotlib.use(...)`` and no pyplot (whose figures a notebook would show, and
+    whose first figure resolves a backend) anywhere in fir_gym/scenarios."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            assert not (node.func.attr == "use" and isinstance(node.func.value, ast.Name)
+                        and node.func.value.id == "matplotlib"), f"{path.name} calls matplotlib.use"
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            names = [a.name for a in node.names] + [getattr(node, "module", None) or ""]
+            assert not any("pyplot" in n for n in names), f"{path.name} imports pyplot"
