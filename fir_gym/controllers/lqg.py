@@ -12,10 +12,15 @@ controller, exact for a linear plant with Gaussian noise (the Kalman filter plus
 LQR), an approximation otherwise. On an env that observes the true state it is the
 LQR itself. It does not apply to the raw measurement (the gain needs a state): give
 it an estimator.
+
+On an estimate, a plant may detune the design: VanDerPol-v0 weights the input 3 instead
+of the reward's 0.01, because its estimates are as noisy as its state (the reasons and
+the evidence: :mod:`.operating_points`). ``input_weight`` sets that weight by hand.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -31,18 +36,35 @@ class LQGController(Controller):
     Args:
         env: a fir-gym plant wrapped to observe an estimate or the true state (a
             Gymnasium env or a stable-baselines3 ``VecEnv`` of such envs).
+        input_weight: the weight of ``a²`` in the design's stage cost (a positive
+            number; on a single-input plant). Default: the reward's, or on an estimate
+            the plant's ``estimate_input_weight`` where it has one.
 
     Attributes: ``point`` (the operating point and weights), ``design`` (``A``, ``B``,
     ``Q``, ``R``, ``N``, the gain ``K`` and the closed-loop poles of the linearisation).
     """
 
-    def __init__(self, env: Any) -> None:
+    def __init__(self, env: Any, *, input_weight: float | None = None) -> None:
         super().__init__(env)
         if self.observed == "measurement":
             raise ValueError("LQGController needs an env that observes a state estimate or "
                              "the true state; this one observes the raw measurement (wrap it "
                              "with an estimator, e.g. gym.make(id, estimator='ekf'))")
-        self.point = design_point(self.plant)
+        point = design_point(self.plant)
+        if input_weight is None and self.observed == "estimate":
+            input_weight = point.estimate_input_weight
+        if input_weight is not None:
+            try:
+                weight = float(input_weight)
+            except (TypeError, ValueError):
+                weight = float("nan")
+            if not (np.isfinite(weight) and weight > 0):
+                raise ValueError(f"input_weight must be a positive number; got {input_weight!r}")
+            M = point.M.copy()
+            n_x = len(point.x)
+            M[n_x:, n_x:] = weight * np.eye(M.shape[0] - n_x)
+            point = replace(point, M=M)
+        self.point = point
         self.design: LQRDesign = lqr_design(self.plant.model, self.point)
 
     def act(self, observation: FloatArray, state: Any, episode_start: np.ndarray

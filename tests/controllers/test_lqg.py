@@ -141,3 +141,23 @@ def test_stable_baselines3_evaluate_policy_takes_the_controller():
 def test_lqg_refuses_the_raw_measurement():
     with pytest.raises(ValueError, match="estimate"):
         LQGController(gym.make("fir_gym/Orbit-v0"))
+
+
+def test_the_van_der_pol_lqg_is_detuned_on_an_estimate_only():
+    """VanDerPol-v0's estimate-fed LQG weights the input 3 (operating_points): the same
+    design as the reward's weights with a² weighted 3, slower in x2 than the true-state LQR;
+    ``input_weight`` overrides it and bad values are refused by name."""
+    env_id = "fir_gym/VanDerPol-v0"
+    true = LQGController(wrap_observation(gym.make(env_id), "true"))
+    estimated = LQGController(gym.make(env_id, estimator="ekf"))
+    assert true.point.M[2, 2] == 0.01 and estimated.point.M[2, 2] == 3.0
+    np.testing.assert_array_equal(true.point.M[:2, :2], estimated.point.M[:2, :2])
+    slow = np.sort(np.abs(estimated.design.closed_loop_poles))
+    fast = np.sort(np.abs(true.design.closed_loop_poles))
+    assert slow[0] > 10 * fast[0] and np.max(slow) < 1.0
+    assert np.all(np.abs(estimated.design.K) < np.abs(true.design.K))
+    by_hand = LQGController(gym.make(env_id, estimator="ekf"), input_weight=0.01)
+    np.testing.assert_allclose(by_hand.design.K, true.design.K, rtol=1e-12)
+    for bad in (0.0, -1.0, float("nan"), "heavy"):
+        with pytest.raises(ValueError, match="input_weight"):
+            LQGController(gym.make(env_id, estimator="ekf"), input_weight=bad)
