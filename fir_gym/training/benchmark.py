@@ -10,10 +10,13 @@ nominal model on the EKF's estimate; nothing trained). :data:`SEEDS` seeds per
 learned kind, every run evaluated on the same :data:`EPISODES` episodes.
 
 The table gives, per plant and kind, the interquartile mean (IQM) of the per-seed
-mean returns with a 95 % bootstrap interval over seeds (:mod:`.stats`), the same
-normalised by the true-state kind (``IQM(true) / IQM(kind)``: returns are costs, so 1
-matches the true-state controller and 0.5 costs twice as much), the closed-loop
-estimation RMSE per state and the ANEES. :func:`answers` states, from those numbers,
+mean returns with a 95 % bootstrap interval over the seeds and the shared evaluation
+episodes (:func:`.stats.episode_bootstrap`: the LQG, deterministic given its seed, runs
+once, and its interval comes from its episodes), the same normalised by the true-state
+kind (``IQM(true) / IQM(kind)``: returns are costs, so 1 matches the true-state
+controller and 0.5 costs twice as much), the closed-loop estimation RMSE per state and
+the ANEES. :func:`answers` states, from those numbers (kinds compared by the interval
+of their paired difference on the same bootstrap draws),
 whether an estimate-fed controller matches the true-state one, whether a filter beats
 memory and whether LQG beats the learned controllers. Learning curves per plant go to
 ``OUT/figures``.
@@ -36,7 +39,7 @@ from fir_gym.tables import format_table
 
 from .compare import make_configs, run_job, validate
 from .curves import plot_learning_curves
-from .stats import iqm_ci, normalised_iqm_ci
+from .stats import episode_bootstrap, iqm, percentile_interval
 
 #: differences below this fraction of the returns count as a match (the true-state and LQG
 #: controllers converge to the same saturated control on Orbit-v0: their intervals are
@@ -124,27 +127,40 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
 
 
 def summarise(results: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    """Per plant, one row per kind: IQM and interval, normalised IQM, RMSE, ANEES."""
+    """Per plant, one row per kind: IQM and interval, normalised IQM, RMSE, ANEES.
+
+    The intervals come from :func:`~.stats.episode_bootstrap`: each resample draws the
+    shared evaluation episodes, then each kind's runs, so the LQG (one run: it is
+    deterministic given its seed) gets an interval from its episodes, and a learned kind
+    one from its seeds and episodes together. Each row keeps its runs' episode returns
+    (``episode_returns``), from which :func:`answers` compares kinds on the same draws.
+    """
     tables: dict[str, list[dict[str, Any]]] = {}
     for env_id in dict.fromkeys(r["config"]["env_id"] for r in results):
         rows = [r for r in results if r["config"]["env_id"] == env_id]
         per_kind = {k: [r for r in rows if r["kind"] == k] for k in KINDS}
-        reference = [r["mean"] for r in per_kind["true"]]
+        per_kind = {k: runs for k, runs in per_kind.items() if runs}
+        returns = {k: [list(map(float, r["returns"])) for r in runs]
+                   for k, runs in per_kind.items()}
+        draws = episode_bootstrap(returns)
+        centres = {k: iqm([sum(e) / len(e) for e in returns[k]]) for k in per_kind}
         table = []
         for kind, runs in per_kind.items():
-            if not runs:
-                continue
-            means = [r["mean"] for r in runs]
-            centre, low, high = iqm_ci(means)
-            norm = normalised_iqm_ci(means, reference) if reference else (None, None, None)
+            low, high = percentile_interval(draws[kind])
+            norm: tuple[float | None, float | None, float | None] = (None, None, None)
+            if "true" in draws:
+                ratio = draws["true"] / draws[kind]
+                norm = (centres["true"] / centres[kind], *percentile_interval(ratio))
             rmse = [r["rmse"] for r in runs if r.get("rmse") is not None]
             anees = [r["anees"] for r in runs if r.get("anees") is not None]
             table.append({
-                "kind": kind, "seeds": len(runs), "iqm": centre, "low": low, "high": high,
+                "kind": kind, "seeds": len(runs), "episodes": len(returns[kind][0]),
+                "iqm": centres[kind], "low": low, "high": high,
                 "normalised": norm[0], "normalised_low": norm[1], "normalised_high": norm[2],
                 "rmse": [sum(c) / len(c) for c in zip(*rmse, strict=True)] if rmse else None,
                 "anees": sum(anees) / len(anees) if anees else None,
-                "diverged_episodes": sum(r.get("diverged_episodes", 0) for r in runs)})
+                "diverged_episodes": sum(r.get("diverged_episodes", 0) for r in runs),
+                "episode_returns": returns[kind]})
         tables[env_id] = table
     return tables
 
@@ -154,6 +170,8 @@ def answers(tables: dict[str, list[dict[str, Any]]]) -> list[str]:
     out = []
     for env_id, table in tables.items():
         rows = {r["kind"]: r for r in table}
+        draws = (episode_bootstrap({k: r["episode_returns"] for k, r in rows.items()})
+                 if all("episode_returns" in r for r in table) else None)
         name = env_id.split("/")[-1]
         if "true" not in rows:
             continue
@@ -172,13 +190,13 @@ def answers(tables: dict[str, list[dict[str, Any]]]) -> list[str]:
                          f"{f['normalised']:.2f} [{f['normalised_low']:.2f}, "
                          f"{f['normalised_high']:.2f}] of the true-state one and {verdict}")
         if best_filter and best_memory:
-            verdict = _compare(rows, best_filter, best_memory)
+            verdict = _compare(rows, best_filter, best_memory, draws)
             parts.append(f"the best filter ({best_filter}) {verdict} the best memory "
                          f"baseline ({best_memory})")
         if "lqg" in rows and best_learned:
-            parts.append(f"LQG {_compare(rows, 'lqg', best_learned)} the best learned "
+            parts.append(f"LQG {_compare(rows, 'lqg', best_learned, draws)} the best learned "
                          f"controller without the true state ({best_learned}), and "
-                         f"{_compare(rows, 'lqg', 'true')} PPO on the true state")
+                         f"{_compare(rows, 'lqg', 'true', draws)} PPO on the true state")
         out.append(f"{name}: " + "; ".join(parts) + ".")
     return out
 
@@ -188,17 +206,33 @@ def _best(rows: dict[str, dict[str, Any]], kinds: Sequence[str]) -> str | None:
     return max(present, key=lambda k: rows[k]["iqm"]) if present else None
 
 
-def _compare(rows: dict[str, dict[str, Any]], a: str, b: str) -> str:
-    """``beats``, ``loses to``, ``ties with`` (intervals overlap) or ``matches`` (IQMs within
-    :data:`MATCH` of each other)."""
+def _compare(rows: dict[str, dict[str, Any]], a: str, b: str,
+             draws: dict[str, Any] | None = None) -> str:
+    """``matches`` (IQMs within :data:`MATCH` of each other), else ``beats``, ``loses to``
+    or ``ties with``.
+
+    With the bootstrap ``draws`` of :func:`~.stats.episode_bootstrap` the verdict is the
+    95 % interval of the *paired* difference ``IQM(a) − IQM(b)`` (the same episode draws
+    for both): a tie where it contains 0. Without them (a table of intervals only), two
+    intervals that overlap are a tie.
+    """
     ra, rb = rows[a], rows[b]
+    values = f"{ra['iqm']:.4g} vs {rb['iqm']:.4g}"
     if abs(ra["iqm"] - rb["iqm"]) <= MATCH * max(abs(ra["iqm"]), abs(rb["iqm"])):
-        return f"matches ({ra['iqm']:.4g} vs {rb['iqm']:.4g}, within {MATCH:.0%})"
+        return f"matches ({values}, within {MATCH:.0%})"
+    if draws is not None:
+        low, high = percentile_interval(draws[a] - draws[b])
+        interval = f"paired difference [{low:.4g}, {high:.4g}]"
+        if low > 0:
+            return f"beats ({values}, {interval})"
+        if high < 0:
+            return f"loses to ({values}, {interval})"
+        return f"ties with ({values}, {interval} contains 0)"
     if ra["low"] > rb["high"]:
-        return f"beats ({ra['iqm']:.4g} vs {rb['iqm']:.4g}, intervals apart)"
+        return f"beats ({values}, intervals apart)"
     if ra["high"] < rb["low"]:
-        return f"loses to ({ra['iqm']:.4g} vs {rb['iqm']:.4g}, intervals apart)"
-    return f"ties with ({ra['iqm']:.4g} vs {rb['iqm']:.4g}, intervals overlap)"
+        return f"loses to ({values}, intervals apart)"
+    return f"ties with ({values}, intervals overlap)"
 
 
 def markdown(report: dict[str, Any]) -> str:
@@ -220,6 +254,11 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append(format_table(["kind", "seeds", "IQM return [95% CI]",
                                    "normalised by true [95% CI]", "estimation RMSE per state",
                                    "ANEES"], rows, markdown=True))
+        episodes = max((r.get("episodes", 0) for r in table), default=0)
+        if episodes:
+            lines += ["", f"Intervals: 95 % bootstrap over the seeds and the {episodes} "
+                          "evaluation episodes every kind shares (a one-seed kind: over its "
+                          "episodes)."]
         lines += ["", f"![learning curves](figures/{env_id.split('/')[-1]}_learning_curves.png)",
                   ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report["answers"]]

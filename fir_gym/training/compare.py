@@ -26,7 +26,7 @@ import numpy as np
 from .evaluation import evaluate, load_controller, make_eval_env
 from .kinds import is_learned, kind_options
 from .run import RunConfig, algorithm_class, build_training_env, train
-from .stats import iqm_ci
+from .stats import episode_bootstrap, iqm, percentile_interval
 
 
 def validate(configs: Sequence[RunConfig]) -> None:
@@ -149,17 +149,25 @@ def make_configs(env_id: str, kinds: Sequence[str], seeds: Sequence[int], *,
 
 
 def summarise(results: Sequence[dict[str, Any]], kinds: Sequence[str]) -> list[dict[str, Any]]:
-    """Per kind: mean ± std over seeds, per-seed means, IQM and its interval, RMSE, ANEES."""
+    """Per kind: mean ± std over seeds, per-seed means, IQM and its interval, RMSE, ANEES.
+
+    The IQM's 95 % interval resamples the evaluation episodes (the same draw for every
+    kind: they share the episode seeds) and each kind's seeds
+    (:func:`~.stats.episode_bootstrap`), so a classical kind, whose seeds all give the
+    same controller, still has an interval: its episodes'.
+    """
+    per_kind = {kind: [r for r in results if r["kind"] == kind] for kind in kinds}
+    draws = episode_bootstrap({k: [list(map(float, r["returns"])) for r in rows]
+                               for k, rows in per_kind.items()})
     summary = []
-    for kind in kinds:
-        rows = [r for r in results if r["kind"] == kind]
+    for kind, rows in per_kind.items():
         means = [float(r["mean"]) for r in rows]
-        centre, low, high = iqm_ci(means)
+        low, high = percentile_interval(draws[kind])
         rmses = [r["rmse"] for r in rows if r.get("rmse") is not None]
         anees = [r["anees"] for r in rows if r.get("anees") is not None]
         summary.append({
             "observation": kind, "mean": float(np.mean(means)), "std": float(np.std(means)),
-            "per_seed": means, "iqm": centre, "iqm_low": low, "iqm_high": high,
+            "per_seed": means, "iqm": iqm(means), "iqm_low": low, "iqm_high": high,
             "rmse": np.mean(rmses, axis=0).tolist() if rmses else None,
             "anees": float(np.mean(anees)) if anees else None,
             "train_seconds": float(np.sum([r.get("train_seconds", 0.0) for r in rows]))})

@@ -11,7 +11,7 @@ seeds.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import scipy.stats
@@ -81,3 +81,39 @@ def normalised_iqm_ci(scores: ArrayLike, reference: ArrayLike, *, confidence: fl
     low, high = stratified_bootstrap_ci([s, r], ratio, confidence=confidence,
                                         resamples=resamples, seed=seed)
     return ratio([s, r]), low, high
+
+
+def episode_bootstrap(runs: Mapping[str, ArrayLike], *, resamples: int = 5000, seed: int = 0
+                      ) -> dict[str, FloatArray]:
+    """Bootstrap draws of each kind's IQM over its runs of their mean episode returns.
+
+    ``runs[kind]`` is a ``(n_runs, n_episodes)`` array: one row per trained seed (a
+    deterministic controller such as the LQG has one run), one column per evaluation
+    episode. A kind's score is :func:`iqm` of its runs' mean returns. Each resample
+    draws the evaluation episodes with replacement — *one draw shared by every kind*
+    with that number of episodes, because every kind is evaluated on the same episode
+    seeds (a paired design: the noise an episode brings is common to all kinds) — and
+    then, independently per kind, its runs. So a one-run kind's interval is the
+    bootstrap over its episodes, and a learned kind's carries both the seed-to-seed and
+    the episode-to-episode variation. Returns ``{kind: (resamples,) draws}``; the
+    generator is seeded, so the draws are reproducible.
+    """
+    rng = np.random.default_rng(seed)
+    data = {k: np.atleast_2d(np.asarray(v, dtype=np.float64)) for k, v in runs.items()}
+    if any(v.size == 0 for v in data.values()):
+        raise ValueError("every kind needs at least one run with at least one episode")
+    episodes = {n: rng.integers(0, n, (resamples, n))
+                for n in sorted({v.shape[1] for v in data.values()})}
+    draws = {}
+    for kind, R in data.items():
+        means = R[:, episodes[R.shape[1]]].mean(axis=-1).T       # (resamples, n_runs)
+        picked = np.take_along_axis(means, rng.integers(0, R.shape[0], means.shape), axis=1)
+        draws[kind] = np.asarray(scipy.stats.trim_mean(picked, 0.25, axis=1), dtype=np.float64)
+    return draws
+
+
+def percentile_interval(draws: ArrayLike, confidence: float = 0.95) -> tuple[float, float]:
+    """The percentile interval of bootstrap draws."""
+    tail = 50.0 * (1.0 - confidence)
+    low, high = np.percentile(np.asarray(draws, dtype=np.float64), [tail, 100.0 - tail])
+    return float(low), float(high)

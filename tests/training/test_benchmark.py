@@ -57,3 +57,25 @@ def test_unknown_benchmark_plant_is_an_error(tmp_path, capsys):
     assert main(["benchmark-controllers", "--quick", "--plants", "fir_gym/Nope-v0",
                  "--out", str(tmp_path)]) == 2
     assert "unknown benchmark plant" in capsys.readouterr().err
+
+
+def test_answers_compare_paired_episodes_when_the_table_has_them():
+    """With each row's episode returns, a kind that is worse on every shared episode loses
+    although its interval overlaps the other's; a noisy difference around 0 is a tie."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    e = rng.normal(-100.0, 30.0, size=20)
+    noise = np.where(np.arange(20) % 2 == 0, 20.0, -20.0) - 2.5
+    rows = {"true": [e], "ekf": [e + noise], "recurrent": [e - 40.0], "lqg": [e - 2.0]}
+    table = []
+    for kind, runs in rows.items():
+        mean = float(np.mean(runs[0]))
+        table.append({**_row(kind, mean, mean - 15, mean + 15), "episode_returns": runs})
+    text = answers({"fir_gym/Orbit-v0": table})[0]
+    assert "and loses to (-107.5 vs -105.5, paired difference [-2, -2]) PPO on the true " \
+           "state" in text
+    assert "the best filter (ekf) beats" in text
+    table[-1]["episode_returns"] = [e + noise]
+    table[-1]["iqm"] = float(np.mean(e + noise))
+    assert "contains 0) PPO on the true state" in answers({"fir_gym/Orbit-v0": table})[0]

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from fir_gym.training.stats import iqm, iqm_ci, normalised_iqm_ci, stratified_bootstrap_ci
+from fir_gym.training.stats import (
+    episode_bootstrap,
+    iqm,
+    iqm_ci,
+    normalised_iqm_ci,
+    percentile_interval,
+    stratified_bootstrap_ci,
+)
 
 
 def test_iqm_is_the_mean_of_the_middle_half():
@@ -39,3 +46,32 @@ def test_normalised_score_is_one_for_the_reference_and_orders_costs():
     assert worse == pytest.approx(0.5, rel=1e-12) and hi < 1.0
     value, lo, hi = iqm_ci(ref)
     assert lo <= value <= hi
+
+
+def test_episode_bootstrap_of_one_run_is_the_bootstrap_of_its_mean():
+    """One run (a deterministic controller): the draws are the percentile bootstrap of the
+    mean over its episodes (scipy as the oracle)."""
+    rng = np.random.default_rng(5)
+    episodes = rng.normal(-100.0, 30.0, size=20)
+    draws = episode_bootstrap({"lqg": [episodes]}, resamples=20_000, seed=1)["lqg"]
+    low, high = percentile_interval(draws)
+    ref = scipy.stats.bootstrap((episodes,), np.mean, method="percentile", n_resamples=20_000,
+                                random_state=2).confidence_interval
+    assert low == pytest.approx(ref.low, abs=0.6) and high == pytest.approx(ref.high, abs=0.6)
+    assert high - low > 10.0                                   # not a point: episodes vary
+
+
+def test_episode_bootstrap_pairs_the_shared_episodes_and_resamples_runs():
+    rng = np.random.default_rng(6)
+    episodes = rng.normal(-100.0, 30.0, size=20)
+    runs = np.stack([episodes + shift for shift in (-3.0, 0.0, 3.0, 1.0, -1.0)])
+    draws = episode_bootstrap({"a": [episodes], "b": [episodes - 2.0], "same": [episodes] * 3,
+                               "learned": runs})
+    # the same episode draw for every kind: a constant shift is exactly the difference
+    np.testing.assert_allclose(draws["a"] - draws["b"], 2.0, rtol=0, atol=1e-9)
+    # identical runs add nothing to the interval
+    np.testing.assert_allclose(draws["same"], draws["a"], rtol=0, atol=1e-9)
+    # the runs' spread does: the learned kind's draws differ from a's by more than a shift
+    assert np.ptp(draws["learned"] - draws["a"]) > 1.0
+    with pytest.raises(ValueError, match="at least one run"):
+        episode_bootstrap({"a": np.zeros((0, 3))})
