@@ -57,36 +57,27 @@ def _episodes(path: Path) -> list[tuple[float, float, float]]:
 
 def plot_learning_curves(runs: Mapping[str, Sequence[str | Path]], path: str | Path,
                          title: str = "") -> Path | None:
-    """Save one learning curve per kind (mean over its runs); None without matplotlib.
+    """Save one learning curve per kind (mean over its runs, ± one std); None without
+    matplotlib.
 
-    ``runs`` maps a label (a kind) to its run folders; kinds without a monitor file
-    (classical controllers) are drawn as a horizontal line when given as a number.
+    ``runs`` maps a label (a kind) to its run folders; kinds without a finished training
+    episode are named on the figure. Drawn by :func:`fir_gym.plotting.plot_learning_curves`
+    on a :class:`matplotlib.figure.Figure` of its own (an Agg canvas, never registered
+    with pyplot): the session's matplotlib backend is not touched.
     """
     try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
     except ImportError:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for label, folders in runs.items():
-        curves = [learning_curve(folder) for folder in folders]
-        curves = [c for c in curves if len(c[0])]
-        if not curves:
-            continue
-        x = curves[0][0]
-        y = np.nanmean([np.interp(x, cx, np.where(np.isnan(cy), np.nanmean(cy), cy))
-                        for cx, cy in curves], axis=0)
-        ax.plot(x, y, label=label)
-    ax.set_xlabel("timesteps")
-    ax.set_ylabel("training episode return")
+    from fir_gym.plotting import plot_learning_curves as draw
+
+    fig = Figure(figsize=(7, 4))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    draw(dict(runs), ax=ax)
     if title:
         ax.set_title(title)
-    if ax.lines:
-        ax.legend(fontsize=8)
-    else:
-        ax.text(0.5, 0.5, "no training episode finished", ha="center", transform=ax.transAxes)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return Path(path)
