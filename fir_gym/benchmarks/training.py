@@ -15,7 +15,9 @@ Beside them the floors that bound the ratios, measured in the same run:
   estimator and no SB3 bookkeeping) and the batched EKF's own step at 16 systems — what
   the fast path cannot skip — cap the ratio at ``dummy / (bare + ekf)``; the rest of the
   fast path's time (``fast − bare − ekf``) is the wrappers' (fir-gym's
-  ``VectorEstimatorObservation`` and ``SB3VecEnv``: the per-env info dicts SB3 wants);
+  ``VectorEstimatorObservation`` and ``SB3VecEnv``), of which building the 16 per-env
+  info dicts SB3's API asks for (the single env's seven keys each, from the vector
+  info) is timed alone (``infos_us``);
 * training: PPO's own cost per sample (the same PPO on a ``VecEnv`` whose step costs
   nothing: the rollout's forward passes and the gradient epochs, stable-baselines3 and
   torch) caps the training ratio at ``(dummy + ppo) / ppo`` — with fir-gym's default
@@ -26,7 +28,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -69,6 +71,13 @@ def _step_envs(quick: bool) -> dict[str, Any]:
             venv.step(actions[k[0] % 64])
         return step
 
+    from fir_gym.training.vec_env import _rows
+
+    vector_info = cast(Any, fast).venv.step(actions[0])[4]    # what SB3VecEnv makes dicts of
+
+    def infos() -> None:
+        _rows(vector_info, N_ENVS)
+
     def ekf_step() -> None:
         ekf.step(y + 1e-3 * (k[0] % 7), u)     # consistent measurements: the lean path
         k[0] += 1
@@ -77,12 +86,14 @@ def _step_envs(quick: bool) -> dict[str, Any]:
     best = interleaved({"dummy": (stepper(dummy), max(5, blocks // 10)),
                         "fast": (stepper(fast), blocks),
                         "bare": (stepper(bare), blocks),
-                        "ekf": (ekf_step, blocks)}, repeats=3 if quick else 7)
+                        "ekf": (ekf_step, blocks),
+                        "infos": (infos, blocks)}, repeats=3 if quick else 7)
     fast.close()
     dummy.close()
     bare.close()
     return {"dummy_us": best["dummy"] * 1e6, "fast_us": best["fast"] * 1e6,
             "ekf16_us": best["ekf"] * 1e6, "bare16_us": best["bare"] * 1e6,
+            "infos_us": best["infos"] * 1e6,
             "ceiling": best["dummy"] / (best["bare"] + best["ekf"]),
             "dummy_steps_per_s": N_ENVS / best["dummy"], "fast_steps_per_s": N_ENVS / best["fast"],
             "ratio": best["dummy"] / best["fast"]}
@@ -192,7 +203,8 @@ def print_results(res: dict[str, Any]) -> None:
          "floor"],
         [["step, random actions", s["dummy_steps_per_s"], s["fast_steps_per_s"], s["ratio"],
           "≥ 10", f"bare native step {s['bare16_us']:.3g} µs + batched EKF step "
-          f"{s['ekf16_us']:.3g} µs of {s['fast_us']:.3g} (ceiling {s['ceiling']:.3g})"],
+          f"{s['ekf16_us']:.3g} µs of {s['fast_us']:.3g} (ceiling {s['ceiling']:.3g}); "
+          f"SB3's info dicts {s['infos_us']:.3g} µs"],
          ["PPO training", t["dummy_steps_per_s"], t["fast_steps_per_s"], t["ratio"], "≥ 3",
           f"PPO alone: {t['ppo_own_steps_per_s']:.4g} steps/s (ceiling {t['ceiling']:.3g})"]],
         floatfmt=".4g"))

@@ -14,6 +14,7 @@ def test_the_training_section_reports_both_ratios_and_their_floors(monkeypatch, 
     res = training.run(quick=True)
     step, train = res["step"], res["train"]
     for value in (step["ratio"], step["ekf16_us"], step["bare16_us"], step["ceiling"],
+                  step["infos_us"],
                   train["ratio"], train["ceiling"], train["ppo_own_steps_per_s"]):
         assert np.isfinite(value) and value > 0
     # the ceiling is the ratio the floor allows: dummy / (bare + ekf)
