@@ -70,7 +70,7 @@ def load_controller(config: RunConfig, run_dir: Path | None, env: Any, *, best: 
         from fir_gym.controllers import LQGController, PIDController
 
         if kind == "lqg":
-            return LQGController(env), None
+            return LQGController(env, **controller_options(kind, config.kind_kwargs)), None
         return PIDController(env, **controller_options(kind, config.kind_kwargs)), None
     if run_dir is None:
         raise ValueError(f"a {kind} controller is learned: evaluate needs its run folder")

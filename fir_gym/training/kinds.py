@@ -10,8 +10,10 @@ A *kind* names what a controller sees and how it is made:
   the estimator's, e.g. ``horizon``);
 * classical, nothing to train: ``lqg`` (the LQR of the nominal model on an estimate;
   options ``estimator`` — a registry name, default ``ekf``, or ``true`` for the LQR on
-  the true state — and that estimator's options) and ``pid`` (on the measured output;
-  options ``kp``, ``ki``, ``kd``, ``setpoint``, ``output``, ``tau``, ``feedforward``).
+  the true state — ``input_weight``, the design's weight of ``a²``
+  (:class:`~fir_gym.controllers.LQGController`), and that estimator's options) and
+  ``pid`` (on the measured output; options ``kp``, ``ki``, ``kd``, ``setpoint``,
+  ``output``, ``tau``, ``feedforward``).
 
 Options travel in one format everywhere (``train``, ``evaluate``,
 ``compare-controllers``, ``benchmark-controllers``): a JSON object mapping each kind to
@@ -32,6 +34,7 @@ from fir_gym.estimators import estimator_names
 LEARNED_PLAIN = ("true", "measurement", "measurement-stack", "recurrent")
 CLASSICAL = ("lqg", "pid")
 PID_OPTIONS = ("kp", "ki", "kd", "setpoint", "output", "tau", "feedforward")
+LQG_OPTIONS = ("input_weight",)
 
 
 def kind_names() -> list[str]:
@@ -82,6 +85,7 @@ def recipe(kind: str, options: Mapping[str, Any], observation: str = "estimate")
         return EnvRecipe(None, {}, "measurement")
     if kind == "lqg":
         estimator = options.pop("estimator", "ekf")
+        options.pop("input_weight", None)               # the controller's (checked there)
         if estimator == "true":
             _no_options("lqg with estimator 'true'", options, ())
             return EnvRecipe(None, {}, "true")
@@ -95,8 +99,10 @@ def recipe(kind: str, options: Mapping[str, Any], observation: str = "estimate")
 
 
 def controller_options(kind: str, options: Mapping[str, Any]) -> dict[str, Any]:
-    """The options of a classical kind that go to the controller (PID's gains)."""
-    return {k: v for k, v in options.items() if k in PID_OPTIONS} if kind == "pid" else {}
+    """The options of a classical kind that go to the controller (PID's gains, the LQG's
+    input weight)."""
+    allowed = PID_OPTIONS if kind == "pid" else LQG_OPTIONS if kind == "lqg" else ()
+    return {k: v for k, v in options.items() if k in allowed}
 
 
 def kind_options(mapping: Mapping[str, Any] | None, kinds: Iterable[str]

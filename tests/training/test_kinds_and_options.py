@@ -78,3 +78,18 @@ def test_policy_kwargs_strings_are_read_without_eval():
     for bad in ("__import__('os').system('true')", "dict(a=open('x'))", "[1, 2]"):
         with pytest.raises(ValueError, match="policy_kwargs"):
             parse_policy_kwargs(bad)
+
+
+def test_the_lqg_kind_takes_the_input_weight_and_checks_it_before_any_job():
+    from fir_gym.training.compare import validate
+    from fir_gym.training.evaluation import load_controller, make_eval_env
+
+    for estimator in ("ekf", "true"):
+        config = RunConfig(env_id="fir_gym/VanDerPol-v0", observation_kind="lqg",
+                           kind_kwargs={"estimator": estimator, "input_weight": 0.5})
+        controller, _ = load_controller(config, None, make_eval_env(config))
+        assert controller.point.M[2, 2] == 0.5
+    bad = RunConfig(env_id="fir_gym/VanDerPol-v0", observation_kind="lqg",
+                    kind_kwargs={"input_weight": -1})
+    with pytest.raises(ValueError, match="lqg: input_weight must be a positive number"):
+        validate([bad])
