@@ -1,4 +1,4 @@
-"""The ODE plants' interval maps as compiled loops (numba).
+"""The ODE plants' interval maps as compiled loops (numba; see ``fir_gym.estimators.compiled``).
 
 One env step of Van der Pol (:mod:`.van_der_pol`) is 100 stochastic Heun substeps
 and one of Orbit (:mod:`.orbit`) 100 Euler substeps — ~30 numpy calls each per
@@ -7,23 +7,16 @@ substeps outside and systems inside, so the inner loop has no dependency chain a
 vectorises, and does the Python path's operations in the same order: the two give
 the same bits (``tests/envs/test_fast_paths.py``).
 
-Without numba each name holds the uncompiled loop instead of ``None`` (so calls type-
-check); callers dispatch on ``active()``, which is False then, and take their numpy path.
+Without numba each name holds the uncompiled loop (:func:`fir_gym.estimators.compiled.jit`),
+so calls type-check; callers dispatch on ``compiled.ENABLED``, which is False then, and
+take their numpy path.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 
-from fir_gym.estimators._compiled import kernel
-
-
-def _compiled(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """``fn`` compiled, or ``fn`` itself where numba is absent (never run: see above)."""
-    return kernel(fn) or fn
+from fir_gym.estimators.compiled import jit
 
 
 def _start_loops(u: np.ndarray, n_b: int, scale: float, jacobian: bool
@@ -40,7 +33,7 @@ def _start_loops(u: np.ndarray, n_b: int, scale: float, jacobian: bool
     return force, J
 
 
-_start = _compiled(_start_loops)
+_start = jit(_start_loops)
 
 
 def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
@@ -86,8 +79,8 @@ def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
 
 #: ``heun_interval(x (B, 2), u (B or 1, n_u), dW (substeps, B), noisy, substeps, ε, τ, u_max,
 #: jacobian)
-#: -> (x_end (B, 2), mean of x1 (B,), Φ (B, 2, 2) or empty)``; ``None`` without numba
-heun_interval = _compiled(_heun_interval)
+#: -> (x_end (B, 2), mean of x1 (B,), Φ (B, 2, 2) or empty)``
+heun_interval = jit(_heun_interval)
 
 
 def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu: float, d: float,
@@ -115,8 +108,8 @@ def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu: float, d: f
 
 
 #: ``orbit_interval(x (B, 2), u (B or 1, n_u), substeps, μ, Δ, thrust_max, jacobian)
-#: -> (x_next (B, 2), J (B, 2, 2) or empty)``; ``None`` without numba
-orbit_interval = _compiled(_orbit_interval)
+#: -> (x_next (B, 2), J (B, 2, 2) or empty)``
+orbit_interval = jit(_orbit_interval)
 
 
 def _slider_derivatives(z: np.ndarray, U: float, mu: float, M0: float, c_: np.ndarray,
@@ -167,7 +160,7 @@ def _slider_derivatives(z: np.ndarray, U: float, mu: float, M0: float, c_: np.nd
         J[3, j] = (M11 * R2[j] - M21 * R1[j]) / det
 
 
-_slider_derivatives_compiled = _compiled(_slider_derivatives)
+_slider_derivatives_compiled = jit(_slider_derivatives)
 
 
 def _slider_rk4(x: np.ndarray, U: np.ndarray, theta: np.ndarray, c_: np.ndarray,
@@ -238,5 +231,5 @@ def _slider_rk4(x: np.ndarray, U: np.ndarray, theta: np.ndarray, c_: np.ndarray,
 
 #: ``slider_rk4(x (B, 4), U (B or 1,) newtons, θ (B or 1, 2) = [μ, M0], constants, friction
 #: code, h, substeps, jacobian) -> (z (B, 4), ∂z/∂x (B, 4, 4), ∂z/∂θ (B, 4, 2))``: paper
-#: 003's RK4 step with its stage-wise exact Jacobians; ``None`` without numba
-slider_rk4 = _compiled(_slider_rk4)
+#: 003's RK4 step with its stage-wise exact Jacobians
+slider_rk4 = jit(_slider_rk4)

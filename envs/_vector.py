@@ -75,7 +75,7 @@ class PlantVectorEnv(VectorEnv):
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
         # the plant's frame rate (instance metadata, as Gymnasium's wrappers set theirs)
-        self.metadata = {**type(self).metadata,  # type: ignore[misc]
+        self.metadata = {**type(self).metadata,
                          "render_fps": self.plant.metadata.get("render_fps", 30)}
         self._frame_views: tuple[Any, ...] = ()
         self.single_action_space = self.plant.action_space

@@ -8,8 +8,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._compiled import active
+from fir_gym.estimators import StateSpaceModel, compiled
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
@@ -46,7 +45,7 @@ class OrbitDynamics(FirstStateMeasured):
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
-        if active(orbit_interval):                 # the same loop compiled: same bits
+        if compiled.ENABLED:                 # the same loop compiled: same bits
             u = np.asarray(u, dtype=np.float64)
             x_next, J = orbit_interval(np.asarray(x, dtype=np.float64).reshape(-1, 2),
                                        u.reshape(-1, u.shape[-1]), self.substeps, self.mu,

@@ -224,7 +224,7 @@ class PendulumSliderEnv(PlantEnv):
         Q: ArrayLike | None = None,
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike | None = None,
-        initial_state_cov: ArrayLike | None = "swing",   # type: ignore[assignment]
+        initial_state_cov: ArrayLike | None = "swing",
         render_mode: str | None = None,
         width: int = 480,
         height: int = 360,

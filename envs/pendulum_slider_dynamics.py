@@ -58,7 +58,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fir_gym.estimators._compiled import active
+from fir_gym.estimators import compiled
 from fir_gym.estimators._validation import FloatArray, one_of, positive
 from fir_gym.estimators.augment import ParametricModel
 
@@ -193,7 +193,7 @@ class PendulumSliderDynamics:
         (:func:`~._interval_kernels.slider_rk4`; equal to round-off, tested) — for the
         physical equations; the printed ones run this numpy loop.
         """
-        if self.equations == "physical" and active(slider_rk4):
+        if self.equations == "physical" and compiled.ENABLED:
             return self._propagate_compiled(x, u, theta, jacobian)
         U = self.input_scale * u[..., 0]
         theta = np.broadcast_to(theta, x.shape[:-1] + (2,))

@@ -9,8 +9,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._compiled import active
+from fir_gym.estimators import StateSpaceModel, compiled
 from fir_gym.estimators._validation import FloatArray, positive
 from fir_gym.estimators.continuous import ContinuousModel
 
@@ -78,7 +77,7 @@ class VanDerPolDynamics(FirstStateMeasured):
         """
         lead = x.shape[:-1]
         single = x.size == 2                       # one system, batched as (1, 2) or not
-        if active(heun_interval):
+        if compiled.ENABLED:
             return self._integrate_compiled(x, u, dW, jacobian)
         if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
             return self._integrate_rows(x, u, dW, jacobian)

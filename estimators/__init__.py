@@ -16,7 +16,8 @@ from .efir import ExtendedFIRFilter
 from .extended import ExtendedKalmanFilter
 from .fir import FIRFilter
 from .fir_smoother import FIRSmoother
-from .kalman import Innovation, KalmanFilter, LinearizedKalmanFilter, kf_predict, kf_update
+from .kalman import Innovation, KalmanFilter, kf_predict, kf_update
+from .linearized import LinearizedKalmanFilter
 from .metrics import anees, chi2_band, mean_nis, nees, nis, rmse, within_band
 from .model import LinearModel, StateSpaceModel, SystemMatrices, TimeVaryingLinearModel
 from .recursive_fir import RecursiveFIRFilter

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._compiled import active
-from ._fir_bank_kernels import bank_estimate, bank_predict, bank_update
+from . import compiled
 from ._validation import FloatArray
+from .compiled import window_bank as compiled_bank
 
 #: An information matrix ``F`` counts as singular when the smallest eigenvalue of
 #: its unit-diagonal (Jacobi-scaled) version is below this: the estimate would
@@ -54,9 +54,9 @@ class WindowBank:
     update is one matmul ``r = C [P | T | x̄] − [0 | 0 | y] = [C P | C T | −e]`` and
     one rank-``p`` correction ``Z −= [K; W] ⊗ r`` with ``[K; W] = [P Cᵀ; (C T)ᵀ] Σ⁻¹``.
 
-    Batches of more than one system run compiled loops (:mod:`._fir_bank_kernels`); a
-    batch of one keeps the numpy path, which the single-system EFIR step
-    (:mod:`._efir_lean`) reproduces bit for bit.
+    Each operation has a compiled twin (:mod:`.compiled.window_bank`), one pass over
+    ``Z`` for any batch, a single system included; it runs exactly when
+    :data:`compiled.ENABLED <fir_gym.estimators.compiled.ENABLED>`.
     """
 
     def __init__(self, n_batch: int, n_windows: int, n: int) -> None:
@@ -84,9 +84,10 @@ class WindowBank:
         ``y``: ``(B, p)`` or ``(B, W, p)``; ``valid``: ``(B,)`` — invalid systems skip.
         """
         n, Z = self.n, self.Z
-        if C.shape[-2] <= 2 and Z.shape[0] > 1 and active(bank_update):  # one compiled pass
-            bank_update(Z, _windows(C), R, y[:, None] if y.ndim == 2 else y,
-                        _ALL if valid is None else valid, (0,) * n)
+        if compiled.ENABLED:                                    # one compiled pass over Z
+            compiled_bank.update(Z, _windows(C), np.ascontiguousarray(R),
+                                 y[:, None] if y.ndim == 2 else y,
+                                 _ALL if valid is None else valid, (0,) * n)
             return
         r = _lmul(C, Z[:, :n])                                  # (B, p, W, 2n+1)
         r[..., 2 * n] -= y[:, :, None] if y.ndim == 2 else y.swapaxes(1, 2)
@@ -117,11 +118,11 @@ class WindowBank:
         ``Qx``: ``(n, n)`` or ``(B, n, n)`` (``None``: no process noise, ``P`` stays 0).
         """
         n, Z = self.n, self.Z
-        if Z.shape[0] > 1 and active(bank_predict):             # one compiled pass over Z
-            bank_predict(Z, _windows(A), _NONE if Bu is None else
-                         (Bu[:, None] if Bu.ndim == 2 else Bu),
-                         _NONE if Qx is None else (Qx[None] if Qx.ndim == 2 else Qx),
-                         Bu is not None, Qx is not None, (0,) * n)
+        if compiled.ENABLED:                                    # one compiled pass over Z
+            compiled_bank.predict(Z, _windows(A), _NONE if Bu is None else
+                                  (Bu[:, None] if Bu.ndim == 2 else Bu),
+                                  _NONE if Qx is None else (Qx[None] if Qx.ndim == 2 else Qx),
+                                  Bu is not None, Qx is not None, (0,) * n)
             return
         Z[:, :n] = _lmul(A, Z[:, :n])
         if Qx is not None:
@@ -147,16 +148,17 @@ class WindowBank:
         values are meaningless and the caller falls back.
         """
         n = self.n
-        if prior is None and not smoother and n <= 3 and self.Z.shape[0] >= 32 and \
-                active(bank_estimate):
-            x, P, regular = bank_estimate(self.Z, w, RANK_RTOL * n ** (n - 1), (0,) * n)
-            if regular.all():                   # else the numpy path's eigenvalue test
-                return x, P, regular
+        if compiled.ENABLED:
+            return compiled_bank.estimate(
+                self.Z, self.ref, w, smoother, _NONE if prior is None else
+                (prior[None] if prior.ndim == 2 else prior), prior is not None, RANK_RTOL,
+                (0,) * n)
         Zs = self.Z[:, :, w, :]
         if prior is None:
             Fi, regular = spd_inverse(-Zs[:, n:, n:2 * n])
         else:
-            Fi = np.linalg.solve(np.eye(n) - prior @ Zs[:, n:, n:2 * n], prior)
+            Fi = np.linalg.solve(np.eye(n) - prior @ Zs[:, n:, n:2 * n], prior).astype(
+                np.float64, copy=False)
             regular = np.ones(Zs.shape[0], bool)
         b = Zs[:, n:, 2 * n:]                                   # (B, n, 1)
         if smoother:
@@ -196,7 +198,7 @@ def spd_inverse(F: FloatArray) -> tuple[FloatArray, np.ndarray]:
         if not ok.all():
             ok = information_is_regular(F)
             Fi = np.linalg.inv(np.where(ok[:, None, None], F, np.eye(n)))
-        return Fi, ok
+        return Fi.astype(np.float64, copy=False), ok
     if n == 1:
         det, adj = F[:, 0, 0], np.ones((nb, 1, 1))
     elif n == 2:

@@ -1,17 +1,16 @@
-"""Small dense linear algebra for the Kalman-family kernels, vectorised over a batch axis.
+"""Small dense linear algebra of the numpy references, vectorised over a batch axis.
 
 For the tiny matrices of a filter (n ≲ 10) numpy's per-call overhead and its
 batched ``matmul``/``linalg`` loops dominate; these helpers use one BLAS call
 where a factor is shared by the batch, and closed forms/column loops over the
-batch for factorisations of small matrices.
+batch for factorisations of small matrices. Their compiled twins, on blocks of
+systems, are in :mod:`~fir_gym.estimators.compiled.linalg`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._compiled import active
-from ._kalman_kernels import cholesky_rows, spd_inverse_batch
 from ._validation import FloatArray
 
 
@@ -63,11 +62,9 @@ def cholesky(S: FloatArray) -> FloatArray:
     definite gets an all-NaN factor, so callers flag it instead of raising.
     """
     n_b, m, _ = S.shape
-    if active(cholesky_rows):
-        return cholesky_rows(np.ascontiguousarray(S))
     if m > 3 and n_b < 32:
         try:
-            return np.linalg.cholesky(S)
+            return np.linalg.cholesky(S).astype(np.float64, copy=False)
         except np.linalg.LinAlgError:
             out = np.full_like(S, np.nan)
             for b in range(n_b):
@@ -136,6 +133,4 @@ def spd_inverse(S: FloatArray) -> FloatArray:
         W[:, 1, 1] = a / det
         W[:, 0, 1] = W[:, 1, 0] = -b / det
         return W
-    if active(spd_inverse_batch):
-        return spd_inverse_batch(np.ascontiguousarray(S))
     return cho_solve(cholesky(S), np.broadcast_to(eye(m), S.shape))

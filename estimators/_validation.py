@@ -3,10 +3,13 @@
 Every public constructor, ``reset`` and ``step`` in this package validates its
 inputs here, so a bad argument fails at the boundary with a message that names
 the argument and says what was expected (docs/architecture.md#validation).
+Numbers must be real: :func:`real_array` refuses booleans, complex numbers, dates and
+anything non-numeric (strings, ``None``) instead of letting numpy convert or drop them.
 """
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Iterable
 from typing import Any
 
@@ -18,6 +21,48 @@ FloatArray = NDArray[np.float64]
 #: Relative tolerance for symmetry and for the smallest admissible eigenvalue.
 SYMMETRY_RTOL = 1e-9
 
+#: dtype kinds read as real numbers: floats, signed and unsigned integers
+REAL_KINDS = "fiu"
+#: scalar types numpy counts as numbers that are not real numbers here
+_NOT_REAL = (bool, np.bool_, np.datetime64, np.timedelta64)
+
+
+def real_array(name: str, value: ArrayLike) -> FloatArray:
+    """``value`` as a float64 array, refusing what is not real numbers.
+
+    Floats and integers (numpy arrays, scalars, nested sequences) are accepted;
+    booleans, complex numbers, ``datetime64``/``timedelta64``, strings and other
+    objects raise ``TypeError`` naming ``name`` (numpy would otherwise turn ``True`` into
+    1, ``"0.5"`` into 0.5, or drop an imaginary part). A ragged sequence raises
+    ``ValueError``.
+    """
+    if type(value) is np.ndarray and value.dtype.kind in REAL_KINDS:
+        return value.astype(np.float64, copy=False)
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError):
+        raise ValueError(f"{name} must be an array of real numbers; got a ragged or "
+                         f"malformed {type(value).__name__}") from None
+    kind = arr.dtype.kind
+    if kind == "O" and all(isinstance(v, numbers.Real) and not isinstance(v, _NOT_REAL)
+                           for v in arr.flat):
+        kind = "f"                              # e.g. Fractions or Decimals mixed with floats
+    elif kind in REAL_KINDS and _holds_bool(value):
+        kind = "b"                              # numpy reads [True, 0.5] as [1.0, 0.5]
+    if kind not in REAL_KINDS:
+        what = {"b": "booleans", "c": "complex numbers", "M": "dates (datetime64)",
+                "m": "time spans (timedelta64)", "U": "strings", "S": "bytes"}.get(
+                    kind, f"{type(value).__name__} of dtype {arr.dtype}")
+        raise TypeError(f"{name} must be real numbers (floats or integers); got {what}")
+    return arr.astype(np.float64, copy=False)
+
+
+def _holds_bool(value: Any) -> bool:
+    """Whether a (nested) list or tuple holds a boolean anywhere."""
+    if isinstance(value, (list, tuple)):
+        return any(isinstance(v, (bool, np.bool_)) or _holds_bool(v) for v in value)
+    return False
+
 
 def as_matrix(name: str, value: ArrayLike, shape: tuple[int | None, int | None]) -> FloatArray:
     """Return ``value`` as a finite float64 2-D array of the given shape.
@@ -25,7 +70,7 @@ def as_matrix(name: str, value: ArrayLike, shape: tuple[int | None, int | None])
     ``None`` in ``shape`` accepts any size on that axis. A scalar is accepted
     for a 1x1 matrix.
     """
-    arr = np.asarray(value, dtype=np.float64)
+    arr = real_array(name, value)
     if arr.ndim == 0 and shape in ((1, 1), (None, None), (1, None), (None, 1)):
         arr = arr.reshape(1, 1)
     if arr.ndim != 2:
@@ -53,7 +98,7 @@ def as_covariance(
     symmetrised exactly) and its smallest eigenvalue must not be below
     ``-SYMMETRY_RTOL * max|eig|`` (or must be positive when ``definite``).
     """
-    arr = np.asarray(value, dtype=np.float64)
+    arr = real_array(name, value)
     if arr.ndim == 0:
         arr = arr.reshape(1, 1)
     elif arr.ndim == 1:
@@ -79,7 +124,7 @@ def as_covariance(
 
 def as_vector(name: str, value: ArrayLike, size: int) -> FloatArray:
     """Return ``value`` as a finite float64 vector of length ``size``."""
-    arr = np.asarray(value, dtype=np.float64)
+    arr = real_array(name, value)
     if arr.ndim == 0 and size == 1:
         arr = arr.reshape(1)
     if arr.shape != (size,):
@@ -95,7 +140,7 @@ def as_batch(name: str, value: ArrayLike, size: int) -> FloatArray:
     Finiteness is not checked here: filters decide what a non-finite
     measurement means (see their ``nan_policy``).
     """
-    arr = np.asarray(value, dtype=np.float64)
+    arr = real_array(name, value)
     if arr.ndim == 0 and size == 1:
         arr = arr.reshape(1)
     if arr.ndim not in (1, 2) or arr.shape[-1] != size:

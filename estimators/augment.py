@@ -129,6 +129,7 @@ class ParametricModel(StateSpaceModel):
         return self._pf(x, u, self.theta)
 
     def _nominal_fF(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        assert self._f_jac_f is not None                   # only handed out when given
         z, Fz, _ = self._f_jac_f(x, u, self.theta)
         return z, Fz
 

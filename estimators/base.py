@@ -12,40 +12,70 @@ An estimator is one object per filter, batched by design:
 * Shapes: ``(n_x,)`` for one system, ``(B, n_x)`` for ``B`` systems in lock-step.
   The batch size is fixed by the prior (a batched ``x0`` or ``P0``) or, when the
   prior is unbatched, by the first batched measurement, to which the prior is
-  broadcast. A batch of one is not a special code path.
-* ``x``, ``P`` (where defined), ``diverged`` and ``last_info`` are readable;
-  returned arrays are fresh copies.
+  broadcast. One system is held as a batch of one: it takes the same code.
+* ``x``, ``P`` (where defined), ``diverged`` and ``last_info`` are readable; returned
+  arrays are fresh copies.
 * ``restart(systems)`` sends some systems of a batch back to their prior: their
   next ``step`` consumes a first measurement (update only) while the others
   predict and update as usual — what a vector env's autoreset needs.
 
+**Input.** ``y``, ``u``, ``x0`` and ``P0`` must be real numbers (floats or integers):
+booleans, complex numbers, dates and strings raise ``TypeError`` naming the argument
+(:func:`~._validation.real_array`); a wrong shape raises ``ValueError``.
 **Non-finite measurements** follow ``nan_policy``: ``"raise"`` (default) raises
 ``ValueError`` naming ``y``; ``"skip"`` treats the measurement of a system whose
-``y`` has any NaN as missing (that system predicts only).
+``y`` has any NaN as missing (that system predicts only). ``u`` must be finite.
 
 **Divergence.** After every step a system is flagged as diverged when its
 estimate or covariance is non-finite, when ``trace(P)`` exceeds
 ``max_covariance_trace``, or when its normalised innovation squared has stayed
-above the ``1 - nis_tail`` χ² quantile for ``nis_patience`` consecutive steps.
-The flag is sticky until ``reset``. A system whose estimate became non-finite
-keeps its last finite estimate (and covariance), so NaN never reaches a caller.
+above the ``1 - nis_tail`` χ² quantile for ``nis_patience`` consecutive steps (a
+NaN NIS of a usable measurement counts as above). The flag is sticky until
+``reset``. A system whose estimate became non-finite keeps its last finite
+estimate (and covariance), so NaN never reaches a caller.
+
+**One step, two implementations.** The hooks :meth:`_update` and :meth:`_predict_update`
+(returning new arrays) with :meth:`_accept` (the watch above) are the numpy reference.
+A class that sets ``has_compiled_step`` also implements :meth:`_compiled_update` and
+:meth:`_compiled_predict_update`: the same step with the compiled twins of
+:mod:`~fir_gym.estimators.compiled`, written in place into the same state arrays,
+watch included. :meth:`step` takes the compiled one exactly when
+:data:`compiled.ENABLED <fir_gym.estimators.compiled.ENABLED>` (the package's one dispatch
+rule). A subclass that overrides a numpy hook the twin replaces (``twin_replaces``)
+without overriding the twins steps on numpy.
+
+**Copies are copies.** The state is plain arrays and numbers — no closures, no views
+of other arrays — so ``copy.deepcopy`` and ``pickle`` work at any point and the copy's
+future equals the original's bit for bit.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
 import scipy.stats
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_batch, as_covariance, one_of, positive
+from . import compiled
+from ._validation import FloatArray, as_batch, as_covariance, one_of, positive, real_array
 from .model import StateSpaceModel
 
 NAN_POLICIES = ("raise", "skip")
+
+_F64 = np.dtype(np.float64)
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """Whether every value of ``a`` is finite. A few values are summed as Python floats
+    (faster than any numpy call; a sum that is not finite, from a NaN, an inf or an
+    overflow, is looked at value by value); more go to ``np.isfinite`` (a numpy sum
+    would warn when it overflows)."""
+    if a.size <= 16 and math.isfinite(sum(a.ravel().tolist())):
+        return True
+    return bool(np.isfinite(a).all())
 
 
 class Estimator(ABC):
@@ -55,8 +85,8 @@ class Estimator(ABC):
     :meth:`_predict_update` (later steps) on batched arrays ``x (B, n_x)``,
     ``P (B, n_x, n_x)``, ``y (B, n_y)``, ``u (B, n_u)`` and a boolean mask
     ``valid (B,)`` of systems whose measurement is usable. They return the new
-    ``x``, ``P`` (or ``None`` for filters without one) and the normalised
-    innovation squared per system (or ``None``).
+    ``x``, ``P`` (``None`` for a filter without covariance, ``provides_covariance``
+    False) and the normalised innovation squared per system (or ``None``).
     """
 
     #: short registry name (``"kf"``, ``"efir"``, ...)
@@ -67,6 +97,21 @@ class Estimator(ABC):
     provides_covariance: ClassVar[bool] = True
     #: the plant attribute holding the model this filter is built from
     model_attribute: ClassVar[str] = "model"
+    #: whether the step computes a normalised innovation squared (``last_info["nis"]``)
+    reports_nis: ClassVar[bool] = True
+    #: whether the class has compiled twins of its step (:meth:`_compiled_update`,
+    #: :meth:`_compiled_predict_update`)
+    has_compiled_step: ClassVar[bool] = False
+    #: numpy hooks the compiled twins compute in their own way
+    twin_replaces: ClassVar[tuple[str, ...]] = ("_update", "_predict_update", "_accept",
+                                                "_update_systems")
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__
+        if ("_compiled_update" not in own and "_compiled_predict_update" not in own
+                and any(hook in own for hook in cls.twin_replaces)):
+            cls.has_compiled_step = False      # the twins would bypass the override
 
     def __init__(
         self,
@@ -91,6 +136,9 @@ class Estimator(ABC):
             raise ValueError(f"nis_tail must be in (0, 1); got {nis_tail!r}")
         self.nis_patience = positive("nis_patience", nis_patience, integer=True)
         self._nis_threshold = float(scipy.stats.chi2.isf(tail, model.n_y))
+        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`)
+        self._limits = np.array([self._nis_threshold, float(self.nis_patience),
+                                 self.max_covariance_trace])
         self.reset(x0, P0)
 
     # ------------------------------------------------------------------ public API
@@ -101,13 +149,13 @@ class Estimator(ABC):
         ``(B, n_x, n_x)``, symmetric positive semi-definite.
         """
         n = self.model.n_x
-        x0_ = np.zeros(n) if x0 is None else as_batch("x0", x0, n)
+        x0_ = np.zeros(n) if x0 is None else np.array(as_batch("x0", x0, n))
         if not np.all(np.isfinite(x0_)):
             raise ValueError("x0 must be finite")
         if P0 is None:
             P0_ = np.eye(n)
         else:
-            P0_ = np.asarray(P0, dtype=np.float64)
+            P0_ = real_array("P0", P0)
             if P0_.ndim == 3:
                 P0_ = np.stack([as_covariance(f"P0[{i}]", p, n) for i, p in enumerate(P0_)])
             else:
@@ -118,16 +166,18 @@ class Estimator(ABC):
         self._batch: int | None = sizes.pop() if sizes else None
         self._batched_prior = self._batch is not None
         self._x0, self._P0 = x0_, P0_
-        self._x: FloatArray | None = None
-        self._P: FloatArray | None = None
+        #: the state of every system; empty until the first step fixes the batch size
+        self._n_b = 0
+        self._x: FloatArray = np.empty((0, n))
+        self._P: FloatArray = np.empty((0, n, n))
+        self._diverged: np.ndarray = np.zeros(0, bool)
+        self._nis_run: np.ndarray = np.zeros(0, np.int64)
+        self._nis: FloatArray = np.zeros(0)
+        self._fresh: np.ndarray = np.zeros(0, bool)
         self._k = 0
-        self._diverged: np.ndarray | None = None
-        self._nis_run: np.ndarray | None = None
-        self._fresh: np.ndarray | None = None
+        self._single = False
         self._restarting = False
-        self._lean: Any = None
-        self._lean_cache: tuple[Any, ...] = (None, None, (), ())
-        self.last_info: dict[str, Any] = {}
+        self._y_shape: tuple[int, ...] | None = None
         self._reset_state()
 
     def restart(self, systems: ArrayLike) -> None:
@@ -140,32 +190,31 @@ class Estimator(ABC):
         Before the first step, or when every system restarts, this is :meth:`reset`
         with the same prior.
         """
-        if self._x is None:
+        if not self._n_b:
             return
-        n_b = self._x.shape[0]
+        n_b = self._n_b
+        chosen = np.asarray(systems)
         mask = np.zeros(n_b, bool)
         try:
-            mask[np.asarray(systems)] = True
+            mask[chosen] = True
         except (IndexError, ValueError, TypeError):
             raise ValueError(f"systems must be a boolean mask of length {n_b} or indices below "
                              f"{n_b}; got {systems!r}") from None
-        if np.asarray(systems).dtype == bool and np.asarray(systems).shape != (n_b,):
+        if chosen.dtype == bool and chosen.shape != (n_b,):
             raise ValueError(f"systems must be a boolean mask of length {n_b}; got shape "
-                             f"{np.asarray(systems).shape}")
+                             f"{chosen.shape}")
         if not mask.any():
             return
         if mask.all():
             self.reset(self._x0, self._P0)
             return
         n = self.model.n_x
-        self._x = np.array(self._x)
         self._x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
-        if self._P is not None:
-            self._P = np.array(self._P)
-            self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
+        if self._P.shape[0] < n_b:                     # a shared covariance parts ways
+            self._P = np.repeat(self._P, n_b, axis=0)
+        self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
         self._diverged[mask] = False
         self._nis_run[mask] = 0
-        self._nis_running = bool(self._nis_run.any())
         self._fresh |= mask
         self._restarting = True
         self._restart_systems(mask)
@@ -173,75 +222,69 @@ class Estimator(ABC):
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
         """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``.
 
-        The hot path is kept lean (a filter step on a small system costs a few
-        microseconds): shapes are checked with attribute look-ups, finiteness
-        with one reduction, and the exact per-system bookkeeping of
-        :meth:`_accept` runs only when something is off. Floating-point
-        warnings are silenced inside the hooks: a diverging filter is reported
-        through :attr:`diverged`, not through ``RuntimeWarning``.
+        The boundary checks are cheap (a type test, a shape comparison, a finiteness
+        test: a Python sum of up to 16 values, else ``np.isfinite``); the step is then
+        the compiled twin or the numpy reference (see the module docstring).
+        Floating-point warnings are silenced inside the numpy hooks: a diverging filter
+        is reported through :attr:`diverged`, not through ``RuntimeWarning``.
         """
-        lean = self._lean
-        if lean is not None and self._k:
-            out = lean(y, u)
-            if out is not None:
-                return out
-        n_y = self._n_y
-        Y = np.asarray(y, dtype=np.float64)
-        if Y.ndim == 2 and Y.shape[1] == n_y:
-            single = False
-        elif Y.ndim == 1 and Y.shape[0] == n_y:
-            Y, single = Y.reshape(1, n_y), True
-        else:
-            Y = as_batch("y", Y, n_y)       # raises on a wrong shape, or
-            single = Y.ndim == 1           # accepts a scalar when n_y == 1
-            Y = Y.reshape(1, n_y) if single else Y
-        if self._x is None or Y.shape[0] != self._x.shape[0] or single != self._single:
-            self._ensure_batch(Y.shape[0], single)
-        valid = self._all_valid
-        if not math.isfinite(Y.sum()):
-            valid = np.all(np.isfinite(Y), axis=1)
-            if valid.all():             # the sum overflowed; every value is finite
-                valid = self._all_valid
-        if valid is not self._all_valid:
-            if self.nan_policy == "raise":
-                raise ValueError(
-                    "y must be finite (nan_policy='raise'); got NaN or inf in the measurement. "
-                    "Pass nan_policy='skip' to treat it as missing."
-                )
-            Y = np.where(valid[:, None], Y, 0.0)
-        U = self._no_input if u is None else self._check_u(u, Y.shape[0])
-        with np.errstate(all="ignore"):
+        Y, valid = self._measurement(y)
+        U = self._no_input if u is None else self._input(u)
+        if compiled.ENABLED and self.has_compiled_step:
             if self._k == 0:
-                x, P, nis = self._update(self._x, self._P, Y, valid)
+                self._compiled_update(Y, valid)
             else:
-                x_prior, P_prior = self._x, self._P
-                x, P, nis = self._predict_update(x_prior, P_prior, Y, U, valid)
-                if self._restarting:
-                    x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
-            self._accept(x, P, nis, valid)
+                self._compiled_predict_update(Y, U, valid)
+        else:
+            self._numpy_step(Y, U, valid)
+        if self._restarting:
+            self._fresh[:] = False
+            self._restarting = False
         self._k += 1
-        return self._x[0].copy() if self._single else self._x.copy()
+        x = self._x
+        return x[0].copy() if self._single else x.copy()
 
     @property
     def x(self) -> FloatArray:
         """The current estimate (the prior mean before the first step); a copy."""
-        if self._x is None:
+        if not self._n_b:
             return self._x0.copy()
         return self._out(self._x)
 
     @property
     def P(self) -> FloatArray | None:
-        """The current error covariance (or ``None`` where the filter has none); a copy."""
-        if self._x is None:
+        """The current error covariance (the prior's before the first step; ``None`` for a
+        filter without one, ``provides_covariance`` False); a copy."""
+        if not self._n_b:
             return self._P0.copy()
-        return None if self._P is None else self._out(self._P)
+        if not self.provides_covariance:
+            return None
+        P = self._P if self._P.shape[0] == self._n_b else np.broadcast_to(
+            self._P, (self._n_b,) + self._P.shape[1:])
+        return self._out(P)
 
     @property
     def diverged(self) -> bool | np.ndarray:
         """Sticky divergence flag: a bool, or a ``(B,)`` array for a batch."""
-        if self._diverged is None:
+        if not self._n_b:
             return False if not self._batched_prior else np.zeros(self._batch or 0, bool)
         return bool(self._diverged[0]) if self._single else self._diverged.copy()
+
+    @property
+    def last_info(self) -> dict[str, Any]:
+        """Diagnostics of the last step (fresh copies; empty before the first step).
+
+        ``diverged`` (as :attr:`diverged`), ``nis`` (the normalised innovation squared:
+        a float or ``(B,)``, NaN where a measurement was skipped; ``None`` for filters
+        without one) and the filter's own keys (e.g. the windowed filters'
+        ``startup`` and ``rank_deficient``).
+        """
+        if not self._n_b or self._k == 0:
+            return {}
+        nis: Any = None
+        if self.reports_nis:
+            nis = float(self._nis[0]) if self._single else self._nis.copy()
+        return {"diverged": self.diverged, "nis": nis, **self._step_info()}
 
     @property
     def time_step(self) -> int:
@@ -255,8 +298,15 @@ class Estimator(ABC):
     def _restart_systems(self, mask: np.ndarray) -> None:  # noqa: B027 (optional hook)
         """Hook: clear the per-system state of the systems in ``mask`` (see :meth:`restart`)."""
 
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
+    def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
+        """Hook: allocate per-system state once the batch size is known."""
+
+    def _step_info(self) -> dict[str, Any]:
+        """Hook: the filter's own entries of :attr:`last_info` (fresh copies)."""
+        return {}
+
+    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
+                        valid: np.ndarray
                         ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
 
@@ -267,132 +317,83 @@ class Estimator(ABC):
         return self._update(x, P, y, valid)
 
     @abstractmethod
-    def _update(
-        self, x: FloatArray, P: FloatArray | None, y: FloatArray, valid: np.ndarray
-    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        """First step: measurement update of the prior with ``y[0]``."""
+    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """First step: measurement update of the prior with ``y[0]`` (numpy reference)."""
 
     @abstractmethod
-    def _predict_update(
-        self, x: FloatArray, P: FloatArray | None, y: FloatArray, u: FloatArray,
-        valid: np.ndarray,
-    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
-        """Later steps: predict with ``u[k-1]``, then update with ``y[k]``."""
+    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
+                        valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """Later steps: predict with ``u[k-1]``, then update with ``y[k]`` (numpy reference)."""
 
-    # ------------------------------------------------------------------ helpers
-    def _ensure_batch(self, n_batch: int, single: bool) -> None:
-        if self._x is not None:
-            if n_batch != self._x.shape[0] or single != self._single:
-                n_y = self.model.n_y
-                want = f"({n_y},)" if self._single else f"({self._x.shape[0]}, {n_y})"
-                raise ValueError(f"y must have shape {want} like the earlier measurements; "
-                                 f"got a batch of {n_batch}")
-            return
-        if self._batch is not None and (single or n_batch != self._batch):
-            raise ValueError(f"y must have shape ({self._batch}, {self.model.n_y}) to match the "
-                             f"batched prior; got {'a single measurement' if single else n_batch}")
-        self._single = single and self._batch is None
-        n = self.model.n_x
-        self._x = np.array(np.broadcast_to(self._x0, (n_batch, n)))
-        self._P = np.array(np.broadcast_to(self._P0, (n_batch, n, n)))
-        self._diverged = np.zeros(n_batch, bool)
-        self._fresh = np.zeros(n_batch, bool)
-        self._nis_run = np.zeros(n_batch, int)
-        self._nis_running = False
-        self._all_valid = np.ones(n_batch, bool)
-        self._all_valid.setflags(write=False)
-        self._no_input = np.zeros((n_batch, self.model.n_u))
-        self._no_input.setflags(write=False)
-        self._lean_u0 = [0.0] * self.model.n_u
-        self._init_batch(n_batch)
-        self._lean = self._make_lean() if self._single else None
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        """The compiled twin of :meth:`_update` + :meth:`_accept`, in place on the state."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled step")
 
-    def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
-        """Hook: allocate per-system state once the batch size is known."""
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        """The compiled twin of :meth:`_predict_update` + :meth:`_accept`, in place. Systems
+        restarted since the last step (``_fresh``) take an update of their prior only."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled step")
 
-    # ------------------------------------------------------------------ single-system fast path
-    def _make_lean(self) -> Callable[[Any, Any], FloatArray | None] | None:
-        """Hook: a fast step for one system, ``(y, u) -> x̂`` or ``None`` (general path).
-
-        Called once the batch is known to be a single system. The returned function
-        must compute what :meth:`_predict_update` + :meth:`_accept` would, to
-        round-off (the tests check 1e-12), and must not change any state before it
-        commits (:func:`~._lean.commit`); returning ``None`` hands the step to the
-        general path (a NaN measurement, an unusual shape, a covariance that is not
-        positive definite, a divergence test that fails, ...). It runs only after
-        the first step (the first step is an update only, on the general path).
-        """
-        return None
-
-    def _check_u(self, u: ArrayLike, n_batch: int) -> FloatArray:
-        n_u = self.model.n_u
-        u_ = np.asarray(u, dtype=np.float64)
-        if u_.shape == (n_batch, n_u):
-            pass
-        elif u_.shape == (n_u,) or (u_.ndim == 0 and n_u == 1):
-            u_ = u_.reshape(1, n_u)
-            if n_batch > 1:
-                u_ = np.broadcast_to(u_, (n_batch, n_u))
-        else:
-            raise ValueError(f"u must have shape ({n_u},) or ({n_batch}, {n_u}); got {u_.shape}")
-        if not np.isfinite(u_).all():
-            raise ValueError("u must be finite")
-        return u_
+    # ------------------------------------------------------------------ the numpy step
+    def _numpy_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
+        with np.errstate(all="ignore"):
+            if self._k == 0:
+                x, P, nis = self._update(self._x, self._P, Y, valid)
+            else:
+                x_prior, P_prior = self._x, self._P
+                x, P, nis = self._predict_update(x_prior, P_prior, Y, U, valid)
+                if self._restarting:
+                    x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
+            self._accept(x, P, nis, valid)
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
-        """Store the new estimate, keeping the last finite one where the new is not.
+        """The divergence watch (module docstring): store the new estimate where it is
+        finite, keep the last finite one elsewhere, and book every system.
 
-        Fast path: one finiteness reduction over ``x``, ``max |P|`` (``trace P <=
-        n max|P|``, so ``n max|P| <= max_covariance_trace`` clears every system)
-        and ``max nis``. Only when one of them fails are the exact per-system
-        masks computed.
+        Shortcut: one finiteness reduction over ``x``, ``max |P|`` (``trace P <= n
+        max|P|``, so ``n max|P| <= max_covariance_trace`` clears every system) and ``max
+        nis``; only when one of them fails are the exact per-system masks computed. A
+        covariance shared by the batch (``P`` of one row) is stored where it is finite.
         """
         n = x.shape[1]
-        fine = math.isfinite(x.sum())
-        if fine and P is not None:
-            fine = bool(abs(P).max() * n <= self.max_covariance_trace)
-        if fine and nis is not None and (self._nis_running or not nis.max() <= self._nis_threshold):
-            fine = False
+        fine = math.isfinite(x.sum()) and (
+            P is None or bool(abs(P).max() * n <= self.max_covariance_trace))
+        if fine and nis is not None:
+            fine = bool(nis.max() <= self._nis_threshold) and not self._nis_run.any()
         if fine:
-            self._x = x
-            self._P = P
-            if self._single:
-                self.last_info = {"diverged": bool(self._diverged[0]),
-                                  "nis": None if nis is None else float(nis[0])}
-            else:
-                self.last_info = {"diverged": self._diverged.copy(),
-                                  "nis": None if nis is None else nis.copy()}
+            self._x = _owned(x)
+            if P is not None:
+                self._P = _owned(P)
+            self._nis[:] = np.nan if nis is None else nis
             return
         finite = np.all(np.isfinite(x), axis=1)
-        if P is not None:
-            finite &= np.all(np.isfinite(P), axis=(1, 2))
+        blown = ~finite
+        if P is not None:                              # (a filter without covariance: None)
+            finite_P = np.all(np.isfinite(P), axis=(1, 2))
+            finite &= finite_P
             trace = np.trace(P, axis1=1, axis2=2)
             blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
-        else:
-            blown = ~finite
         if nis is not None:
-            high = valid & (np.nan_to_num(nis, nan=np.inf) > self._nis_threshold)
+            high = valid & ~(nis <= self._nis_threshold)      # NaN counts as above
             self._nis_run = np.where(high, self._nis_run + 1, 0)
-            self._nis_running = bool(self._nis_run.any())
             blown |= self._nis_run >= self.nis_patience
         self._diverged |= blown
         self._x = np.where(finite[:, None], x, self._x)
         if P is not None:
-            self._P = P if self._P is None else np.where(finite[:, None, None], P, self._P)
-        else:
-            self._P = None
-        self.last_info = {"diverged": self.diverged, "nis": None if nis is None else
-                          (float(nis[0]) if self._single else nis.copy())}
+            keep = finite_P if P.shape[0] < x.shape[0] else finite
+            self._P = np.where(keep[:, None, None], P, self._P)
+        self._nis[:] = np.nan if nis is None else nis
 
     def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
-                     x_prior: FloatArray, P_prior: FloatArray | None, Y: FloatArray,
-                     valid: np.ndarray) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                     x_prior: FloatArray, P_prior: FloatArray, Y: FloatArray, valid: np.ndarray
+                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """Replace the rows of restarted systems by their first step (an update only)."""
         idx = np.flatnonzero(self._fresh)
-        xs, Ps, ns = self._update_systems(idx, x_prior[idx],
-                                          None if P_prior is None else P_prior[idx],
-                                          Y[idx], valid[idx])
+        xs, Ps, ns = self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx], valid[idx])
         x = np.array(x)
         x[idx] = xs
         if P is not None and Ps is not None:
@@ -401,9 +402,90 @@ class Estimator(ABC):
         if nis is not None:
             nis = np.array(nis)
             nis[idx] = np.nan if ns is None else ns
-        self._fresh[:] = False
-        self._restarting = False
         return x, P, nis
+
+    # ------------------------------------------------------------------ the boundary
+    def _measurement(self, y: ArrayLike) -> tuple[FloatArray, np.ndarray]:
+        """``y`` as ``(B, n_y)`` float64 and the mask of usable rows (``nan_policy``)."""
+        if type(y) is not np.ndarray or y.dtype is not _F64:
+            y = real_array("y", y)
+        if y.shape == self._y_shape:
+            Y = y[None] if self._single else y
+        else:
+            Y = self._first_measurement(y)
+        if _all_finite(Y):
+            return Y, self._all_valid
+        valid = np.all(np.isfinite(Y), axis=1)
+        if self.nan_policy == "raise":
+            raise ValueError("y must be finite (nan_policy='raise'); got NaN or inf in the "
+                             "measurement. Pass nan_policy='skip' to treat it as missing.")
+        return np.where(valid[:, None], Y, 0.0), valid
+
+    def _first_measurement(self, y: FloatArray) -> FloatArray:
+        """A measurement of a shape not yet seen: the first one (which fixes the batch), a
+        scalar for ``n_y = 1``, or an error."""
+        n_y = self._n_y
+        Y = as_batch("y", y, n_y)                      # raises on a wrong shape
+        single = Y.ndim == 1
+        Y = Y.reshape(1, n_y) if single else Y
+        if not self._n_b:
+            self._ensure_batch(Y.shape[0], single)
+        elif Y.shape[0] != self._n_b or single != self._single:
+            want = f"({n_y},)" if self._single else f"({self._n_b}, {n_y})"
+            raise ValueError(f"y must have shape {want} like the earlier measurements; got "
+                             f"{'a single measurement' if single else f'a batch of {len(Y)}'}")
+        return Y
+
+    def _input(self, u: ArrayLike) -> FloatArray:
+        """``u`` as ``(B, n_u)`` float64 (one ``(n_u,)`` input serves every system)."""
+        if type(u) is not np.ndarray or u.dtype is not _F64:
+            u = real_array("u", u)
+        U = self._no_input
+        n_b, n_u = U.shape
+        if u.shape == U.shape:
+            U = u
+        elif u.shape == (n_u,) or (u.ndim == 0 and n_u == 1):
+            U = u.reshape(1, n_u) if n_b == 1 else np.broadcast_to(u.reshape(1, n_u), U.shape)
+        else:
+            raise ValueError(f"u must have shape ({n_u},) or ({n_b}, {n_u}); got {u.shape}")
+        if n_u and not _all_finite(u):
+            raise ValueError("u must be finite")
+        return U
+
+    def _ensure_batch(self, n_batch: int, single: bool) -> None:
+        if self._batch is not None and (single or n_batch != self._batch):
+            raise ValueError(f"y must have shape ({self._batch}, {self.model.n_y}) to match the "
+                             f"batched prior; got {'a single measurement' if single else n_batch}")
+        self._single = single and self._batch is None
+        self._n_b = n_batch
+        self._y_shape = (self._n_y,) if self._single else (n_batch, self._n_y)
+        n = self.model.n_x
+        self._x = np.array(np.broadcast_to(self._x0, (n_batch, n)), order="C")
+        self._P = np.array(np.broadcast_to(self._P0, (n_batch, n, n)), order="C")
+        self._diverged = np.zeros(n_batch, bool)
+        self._nis_run = np.zeros(n_batch, np.int64)
+        self._nis = np.full(n_batch, np.nan)
+        self._fresh = np.zeros(n_batch, bool)
+        self._all_valid = np.ones(n_batch, bool)
+        #: ``predict`` masks of the compiled twins: every system, none (the first step)
+        self._all_predict = np.ones(n_batch, bool)
+        self._none_predict = np.zeros(n_batch, bool)
+        self._no_input = np.zeros((n_batch, self.model.n_u))
+        self._init_batch(n_batch)
+
+    def _predicting(self) -> np.ndarray:
+        """The systems that predict this step (the compiled twins' ``predict`` mask)."""
+        if self._k == 0:
+            return self._none_predict
+        return ~self._fresh if self._restarting else self._all_predict
 
     def _out(self, a: FloatArray) -> FloatArray:
         return a[0].copy() if self._single else a.copy()
+
+
+def _owned(a: FloatArray) -> FloatArray:
+    """``a`` if it owns its (writable, C-contiguous) data, else a copy: the state must never be
+    a view of another array, or of a broadcast (the compiled twins write it in place)."""
+    if a.base is None and a.flags.writeable and a.flags.c_contiguous:
+        return a
+    return np.array(a, order="C")

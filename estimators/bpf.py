@@ -128,7 +128,7 @@ def bpf_riccati_step(P: ArrayLike, M: ArrayLike, h: float) -> RiccatiStep:
     half = 0.5 * h * M
     E_minus = np.eye(2 * n) - half
     coef = xi + half @ xi
-    end = np.linalg.solve(E_minus, coef)
+    end = _solve(E_minus, coef)
     P_next, c_end = _ratio(end)
     P_bar, c_bar = _ratio(coef)
     condition = np.maximum(_cond(E_minus), np.maximum(c_end, c_bar))
@@ -209,7 +209,7 @@ def bpf_state_step(x: ArrayLike, M: ArrayLike, b: ArrayLike, h: float) -> FloatA
 def _solve(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a⁻¹ b`` for stacks; a system whose ``a`` is exactly singular gets NaN (flagged later)."""
     try:
-        return np.linalg.solve(a, b)
+        return np.linalg.solve(a, b).astype(np.float64, copy=False)
     except np.linalg.LinAlgError:
         shape = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
         a = np.broadcast_to(a, shape + a.shape[-2:])
@@ -287,16 +287,18 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
     def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
         """As :meth:`Estimator.step`; a global-recursion breakdown also sets ``diverged``."""
         x = super().step(y, u)
-        if self._broken is not None:
-            if self._broken.any():
-                self._diverged |= self._broken
-                self.last_info["diverged"] = self.diverged
-            single = self._single
-            self.last_info["riccati_breakdown"] = (bool(self._broken[0]) if single
-                                                   else self._broken.copy())
-            self.last_info["riccati_condition"] = (float(self._condition[0]) if single
-                                                   else self._condition.copy())
+        if self._broken is not None and self._broken.any():
+            self._diverged |= self._broken
         return x
+
+    def _step_info(self) -> dict[str, Any]:
+        if self._broken is None or self._condition is None:
+            return {}
+        if self._single:
+            return {"riccati_breakdown": bool(self._broken[0]),
+                    "riccati_condition": float(self._condition[0])}
+        return {"riccati_breakdown": self._broken.copy(),
+                "riccati_condition": self._condition.copy()}
 
     # ------------------------------------------------------------------ hooks
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
@@ -335,6 +337,7 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
 
     def _global(self, restarted: RiccatiStep, M: FloatArray, h: float) -> RiccatiStep:
         """The global recursion where it is still well conditioned; the restart elsewhere."""
+        assert self._psi is not None and self._xi0 is not None and self._broken is not None
         psi, step = bpf_riccati_global_step(self._psi, M, self._xi0, h)
         fine = ~self._broken & (step.condition <= self.max_condition)
         for arr in (step.P_next, step.P_bar):

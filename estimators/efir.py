@@ -46,7 +46,6 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _efir_lean
 from ._fir_bank import WindowBank
 from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import WindowedEstimator
@@ -89,9 +88,11 @@ class ExtendedFIRFilter(WindowedEstimator):
     GQGᵀ``). :meth:`restart` starts chosen systems of a batch again from ``x0``
     (nominal, windows and start-up); the others do not notice.
 
-    One system given as ``(n_y,)`` steps, once its windows are full, through the fast
-    path of :mod:`~._efir_lean`: the same numbers bit for bit, in about a third of the
-    time of the batched code on a batch of one.
+    One step is one pass over the windows (:meth:`_advance`): the model's ``f, F`` on
+    the nominal, the window bank's time update, ``h, H`` on the nominal, its measurement
+    update and the read-out of the oldest window — the bank's operations and the
+    divergence watch run their compiled twins where numba is enabled, for one system
+    and a batch alike.
     """
 
     name: ClassVar[str] = "efir"
@@ -147,11 +148,6 @@ class ExtendedFIRFilter(WindowedEstimator):
         super()._restart_systems(mask)
         self._in_startup = True
 
-    def _make_lean(self) -> Any:
-        """The single-system fast step (:func:`~._efir_lean.extended_fir`); a subclass that
-        overrides a step hook gets none."""
-        return _efir_lean.extended_fir(self, ExtendedFIRFilter)
-
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:
         bank, k, L = self._bank, self._k, self.horizon
@@ -166,6 +162,7 @@ class ExtendedFIRFilter(WindowedEstimator):
             start = self._no_startup
         w_out = max(0, k - L + filt) % L               # the oldest window: read out now
         if k:                                          # nominal and perturbation time update
+            assert u is not None
             nom = self._nom.reshape(-1, n)
             uu = u if self._nom.ndim == 2 else np.repeat(u, L, axis=0)
             nom_next, A = self._linearize(nom, uu)      # f and F in one pass of the plant

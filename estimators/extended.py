@@ -14,18 +14,15 @@ finite differences (:meth:`StateSpaceModel.F`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _lean, _small
-from ._compiled import active
-from ._kalman_kernels import predict_update
-from ._kalman_linalg import as_batch
 from ._validation import FloatArray
 from .base import Estimator
-from .kalman import predict_covariance, update_kernel
+from .compiled import kalman as compiled_kalman
+from .kalman import LinearGains, StepMatrices, predict_covariance, update_kernel
 from .model import LinearModel, StateSpaceModel
 from .registry import register_estimator
 
@@ -49,14 +46,14 @@ def model_callables(model: StateSpaceModel) -> tuple[Any, Any, Any, Any]:
 
 def model_linearizer(model: StateSpaceModel) -> Any:
     """``(x, u) -> (f(x, u), F(x, u))`` for the hot path: the model's fused ``fF`` when it has
-    one (one pass of the plant's integrator instead of two), else ``f`` and ``F`` apart."""
+    one (one pass of the plant's integrator instead of two), else the model's own unchecked
+    pair (:meth:`StateSpaceModel.f_and_F`) — a bound method, so a filter holding it pickles."""
     cls = type(model)
     if cls.linearize is StateSpaceModel.linearize and getattr(model, "_fF", None) is not None:
         return model._fF
     if cls.linearize is not StateSpaceModel.linearize:
         return model.linearize
-    f, F, _, _ = model_callables(model)
-    return lambda x, u: (f(x, u), F(x, u))
+    return model.f_and_F
 
 
 class ExtendedKalmanFilter(Estimator):
@@ -68,11 +65,17 @@ class ExtendedKalmanFilter(Estimator):
         x0, P0: prior of ``x[0]``.
         **options: those of :class:`~fir_gym.estimators.base.Estimator`.
 
-    One system of ``n_x, n_y <= 4`` with analytic Jacobians steps through generated
-    float kernels (:mod:`~._lean`), to round-off the same numbers.
+    The compiled twin evaluates the model (``f, F`` in one pass where the plant fuses
+    them, ``h``, ``H``) and hands the covariance algebra to
+    :func:`~.compiled.kalman.predict_update`; on a plain :class:`LinearModel` — where
+    ``f = A x + B u``, ``F = A``, ``h = C x``, ``H = C`` and the EKF is the Kalman filter —
+    it runs :func:`~.compiled.kalman.linear_step` on the matrices instead of calling the
+    model, with the KF's exact shared covariance (systems started from one prior; their
+    covariance recursion does not depend on the data) and no steady-state shortcut.
     """
 
     name = "ekf"
+    has_compiled_step = True
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
@@ -82,15 +85,23 @@ class ExtendedKalmanFilter(Estimator):
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, self._F, self._h, self._H = model_callables(model)
         self._linearize = model_linearizer(model)
-        self._GQGt = model.GQGT
-        self._R_batch = as_batch(model.R)                  # the compiled step's layout
+        self._GQGt = np.ascontiguousarray(model.GQGT)
+        self._R_batch = np.ascontiguousarray(model.R)[None]       # the compiled step's layout
+        self._plain_linear = _is_plain_linear(model, self._f, self._F, self._h, self._H)
 
-    def _make_lean(self) -> Any:
-        if not _small.same_hooks(self, ExtendedKalmanFilter):
-            return None
-        plain = _is_plain_linear(self.model, self._f, self._F, self._h, self._H)
-        return _lean.extended(self, plain)
+    def _init_batch(self, n_batch: int) -> None:
+        n, m = self.model.n_x, self.model.n_y
+        self._identity = np.eye(n)[None]
+        if self._plain_linear:
+            model = cast(LinearModel, self.model)
+            self._mats = StepMatrices(model.A, model.B, model.C, self._GQGt, model.R)
+            self._gains = LinearGains(n, m, may_settle=False)   # no steady-state shortcut
+            if self._P0.ndim == 2:
+                # the covariance recursion of a linear model does not depend on the data:
+                # systems started from one prior share it (the KF's exact shortcut)
+                self._P = self._P0[None].copy()
 
+    # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         e = y - self._h(x)
@@ -100,13 +111,43 @@ class ExtendedKalmanFilter(Estimator):
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
         x, F = self._linearize(x, u)
-        if x.shape[0] > 1 and active(predict_update):      # one compiled loop over systems
-            return predict_update(x, as_batch(P), as_batch(F), self._GQGt, y - self._h(x),
-                                  as_batch(self._H(x)), self._R_batch, valid)
         P = predict_covariance(P, F, self._GQGt)
         e = y - self._h(x)
         x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
         return x, P, nis
+
+    # ------------------------------------------------------------------ compiled twin
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        if self._plain_linear:
+            self._gains.step(self, self._mats, self._mats, self._no_input, y, valid)
+            return
+        x = self._x
+        with np.errstate(all="ignore"):
+            hx, H = self._h(x), self._H(x)
+        self._kalman_step(x, self._identity, y, hx, H, valid)
+
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        if self._plain_linear:
+            self._gains.step(self, self._mats, self._mats, u, y, valid)
+            return
+        x = self._x
+        with np.errstate(all="ignore"):
+            xp, F = self._linearize(x, u)
+            if self._restarting:                       # restarted systems: their prior
+                xp = np.where(self._fresh[:, None], x, xp)
+            hx, H = self._h(xp), self._H(xp)
+        self._kalman_step(xp, F, y, hx, H, valid)
+
+    def _kalman_step(self, xp: FloatArray, F: FloatArray, y: FloatArray, hx: FloatArray,
+                     H: FloatArray, valid: np.ndarray) -> None:
+        """:func:`~.compiled.kalman.predict_update` on the model's values (a 2-D ``F`` or ``H``
+        is shared by the batch)."""
+        compiled_kalman.predict_update(
+            self._x, self._P, xp, F if F.ndim == 3 else F[None], self._GQGt, y, hx,
+            H if H.ndim == 3 else H[None], self._R_batch, valid, self._predicting(),
+            self._diverged, self._nis_run, self._nis, self._limits)
+
 
 
 def _is_plain_linear(model: StateSpaceModel, f: Any, F: Any, h: Any, H: Any) -> bool:

@@ -200,7 +200,7 @@ class FIRFilter(WindowedEstimator):
         prev = self._hist[-1] if self._hist else None
         self._evicted = self._hist[0] if len(self._hist) == self._slots else prev
         self._hist.append(mats)
-        Bu = None if (u is None or not self._nu) else u @ prev.B.T
+        Bu = None if (u is None or not self._nu or prev is None) else u @ prev.B.T
         fresh, self._pending = self._pending, None
         start = self._age < self._window_slots - 1    # per system: window not yet full
         any_start = bool(start.any())
@@ -219,6 +219,7 @@ class FIRFilter(WindowedEstimator):
             else:
                 x, P, ok = np.zeros((nb, n)), np.zeros((nb, n, n)), np.zeros(nb, bool)
             if any_start:
+                assert self._growing is not None
                 xs, Ps, oks = self._bank_step(self._growing, mats, prev, y, Bu, valid, fresh,
                                               ~start)
                 x, ok = np.where(start[:, None], xs, x), np.where(start, oks, ok)
@@ -283,6 +284,7 @@ class FIRFilter(WindowedEstimator):
     def _gain_step(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
         h = min(self._k + (self.form == "filter"), self.horizon)
         nb, n = self._buf.shape[0], self._n
+        win: Window | None
         if self.time_invariant:
             G, P, win = self._G, self._P_fir, self._win
         else:
@@ -291,7 +293,7 @@ class FIRFilter(WindowedEstimator):
                 res = self._compute_gain(win) if win else None
             except ValueError:
                 res = None
-            if res is None:
+            if win is None or res is None:
                 return np.zeros((nb, n)), np.zeros((nb, n, n)), np.zeros(nb, bool)
             G = _combined_gain(res.S, input_gain(win, res.S, self._target), self.form,
                                self._p, self._nu)

@@ -247,7 +247,11 @@ def riccati_gain(win: Window, form: str = "filter", prior: ArrayLike | None = No
 
 def _riccati_prior(win: Window, P0: FloatArray, smoother: bool) -> tuple[FloatArray, FloatArray]:
     L, n = win.horizon, win.A.shape[1]
-    Rs, Gam, Kt, Ws, Sig = [], [], [], [], []    # R(j), I − R Cᵀ R_v⁻¹ C, R Cᵀ R_v⁻¹, W(j), Σ_j
+    Rs: list[FloatArray] = []                    # R(j)
+    Gam: list[FloatArray] = []                   # I − R Cᵀ R_v⁻¹ C
+    Kt: list[FloatArray] = []                    # R Cᵀ R_v⁻¹
+    Ws: list[FloatArray] = []                    # W(j)
+    Sig: list[FloatArray] = []                   # Σ_j
     Mn = P0
     for j in range(L):
         C = win.C[j]

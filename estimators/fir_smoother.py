@@ -68,11 +68,9 @@ class FIRSmoother(FIRFilter):
         """Steps between the newest measurement and the estimated state (``horizon − 1``)."""
         return self.horizon - 1
 
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
-        x = super().step(y, u)
+    def _step_info(self) -> dict[str, Any]:
         t = np.maximum(0, self._age - self.horizon)         # steps since (re)start − lag
-        self.last_info["time"] = int(t[0]) if self._single else t
-        return x
+        return {**super()._step_info(), "time": int(t[0]) if self._single else t}
 
     def _fallback(self, start: np.ndarray, prev: Any, Bu: FloatArray | None
                   ) -> tuple[FloatArray, FloatArray]:
@@ -82,6 +80,7 @@ class FIRSmoother(FIRFilter):
         if prev is None or start.all():
             return x0, P0
         m = self._evicted                                  # matrices at time k − L
+        assert m is not None
         Z, _ = self._window_data(self._slots)
         u_old = Z[:, 0, self._p:]                          # u[k − L]
         x = self._x @ m.A.T + u_old @ m.B.T

@@ -1,4 +1,4 @@
-"""Kalman filter and the linearised Kalman filter of paper 000, over batched pure functions.
+"""Kalman filter over batched pure functions (the linearised one: :mod:`.linearized`).
 
 The two pure functions are the textbook recursion (e.g. Simon, *Optimal State
 Estimation*, 2006, eqs 5.17–5.19), batched over a leading axis:
@@ -13,36 +13,25 @@ Estimation*, 2006, eqs 5.17–5.19), batched over a leading axis:
 ``n_y <= 3``, vectorised over the batch). The Joseph form keeps ``P⁺``
 positive semi-definite for any gain; the result is symmetrised.
 
-:class:`KalmanFilter` reads ``model.matrices(k)``; :class:`LinearizedKalmanFilter`
-is paper 000's LKF (Section 4, the "LKF" of Table 1): it linearises along a
-nominal trajectory run open loop from the filter's initial state.
+:class:`KalmanFilter` reads ``model.matrices(k)``; the pure functions also serve
+:class:`~.linearized.LinearizedKalmanFilter` and :class:`~.extended.ExtendedKalmanFilter`.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _lean, _small
-from ._compiled import active
-from ._kalman_kernels import predict_update
-from ._kalman_linalg import (
-    as_batch,
-    constant_or_batch,
-    eye,
-    mul_t,
-    rmul,
-    spd_inverse,
-    symmetrize,
-)
+from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
-from .model import StateSpaceModel
+from .compiled import kalman as compiled_kalman
+from .model import StateSpaceModel, SystemMatrices
 from .registry import register_estimator
 
-__all__ = ["Innovation", "KalmanFilter", "LinearizedKalmanFilter", "kf_predict", "kf_update"]
+__all__ = ["Innovation", "KalmanFilter", "kf_predict", "kf_update"]
 
 
 class Innovation(NamedTuple):
@@ -238,22 +227,25 @@ class KalmanFilter(Estimator):
     model does not depend on the data:
 
     * **shared covariance** — systems of a batch started from one unbatched
-      ``P0`` and always updated together have the same ``P``; it is computed once
-      and broadcast (a read-only view), so a batch costs one covariance update
-      plus the state updates;
+      ``P0`` and always updated together have the same ``P``; it is held once
+      (``(1, n, n)``) and computed once per step, so a batch costs one covariance
+      update plus the state updates. A skipped measurement or a restart gives every
+      system its own ``P`` from then on;
     * **steady state** — for a time-invariant model, once a step maps ``P`` to
       itself up to round-off (``max|ΔP| <= 4 eps max|P|``; the recursion then only
-      wanders by a few ulps, often in a cycle, never settling bit for bit), the
-      ``P⁺``, ``K`` and ``S⁻¹`` of that step are kept and only the state is
-      updated. Estimates differ from the full recursion at the round-off level
-      (about 1e-16 relative). A skipped measurement, a divergence repair or
-      ``reset`` leaves that regime.
+      wanders by a few ulps, often in a cycle, never settling bit for bit), ``P`` and
+      that step's ``K`` and ``S⁻¹`` are kept and only the state is updated.
+      Estimates differ from the full recursion at the round-off level (about 1e-16
+      relative). A skipped measurement, a repaired (non-finite) estimate, a restart
+      or ``reset`` leaves that regime.
 
-    One system of ``n_x, n_y <= 4`` steps through generated float kernels
-    (:mod:`~._lean`): the same recursion and shortcuts, to round-off.
+    The compiled twin (:func:`~.compiled.kalman.linear_step`) does the same step, both
+    shortcuts included, in one call.
     """
 
     name = "kf"
+    has_compiled_step = True
+    twin_replaces = (*Estimator.twin_replaces, "_correct", "_matrices")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
@@ -261,87 +253,142 @@ class KalmanFilter(Estimator):
             raise TypeError(f"model must be a LinearModel or TimeVaryingLinearModel for "
                             f"{type(self).__name__}; got {type(model).__name__} "
                             f"(use ExtendedKalmanFilter or UnscentedKalmanFilter)")
-        self._constant = getattr(model, "time_invariant", True)
+        self._constant = bool(getattr(model, "time_invariant", True))
         if self._constant:
             self._mats = self._prepare(model.matrices(0))
-            self._A_batch = as_batch(model.matrices(0)[0])  # the compiled step's layout
         super().__init__(model, x0=x0, P0=P0, **options)
 
     @staticmethod
-    def _prepare(mats: Any) -> tuple[FloatArray | None, ...]:
+    def _prepare(mats: Any) -> StepMatrices:
         A, B, C, G, Q, R = mats
-        return (np.ascontiguousarray(A.T), np.ascontiguousarray(B.T) if B.shape[1] else None,
-                C, np.ascontiguousarray(C.T), G @ Q @ G.T, R)
+        return StepMatrices(np.ascontiguousarray(A), np.ascontiguousarray(B),
+                            np.ascontiguousarray(C), np.ascontiguousarray(G @ Q @ G.T),
+                            np.ascontiguousarray(R))
 
-    def _matrices(self, k: int) -> tuple[Any, ...]:
-        return self._mats if self._constant else self._prepare(self.model.matrices(k))
+    def _matrices(self, k: int) -> StepMatrices:
+        if self._constant:
+            return self._mats
+        return self._prepare(cast(_Scheduled, self.model).matrices(k))
 
     def _reset_state(self) -> None:
-        self._steady: tuple[FloatArray, ...] | None = None
-        self._lean_steady: tuple[Any, ...] | None = None
-
-    def _make_lean(self) -> Any:
-        return _lean.kalman(self) if _small.same_hooks(self, KalmanFilter) else None
+        self._gains = LinearGains(self.model.n_x, self.model.n_y, self._constant)
 
     def _init_batch(self, n_batch: int) -> None:
-        if self._P0.ndim == 2 and n_batch > 1:        # one covariance for the whole batch
-            self._P = np.broadcast_to(self._P0, (n_batch, *self._P0.shape))
+        if self._P0.ndim == 2:                         # one covariance for the whole batch
+            self._P = self._P0[None].copy()
 
+    def _restart_systems(self, mask: np.ndarray) -> None:
+        self._gains.regime[0] = 0
+
+    @property
+    def steady_state(self) -> bool:
+        """Whether the filter is in the steady-state regime (``P``, ``K``, ``S⁻¹`` kept)."""
+        return bool(self._gains.regime[0])
+
+    # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         return self._correct(x, P, y, valid, self._matrices(0))[:3]
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        At, Bt, _, _, Qd, _ = self._matrices(self._k - 1)
-        x = rmul(x, At)
-        if Bt is not None:
-            x = x + rmul(u, Bt)
-        steady = self._steady
-        if steady is not None and P is steady[0] and valid is self._all_valid:
-            P_new, K, W, Ct = steady
-            x, nis = correct(x, y - rmul(x, Ct), K, W)
-            return x, P_new, nis
-        self._steady = None
-        if P.strides[0] == 0 and valid is self._all_valid:
-            P = P[:1]                                   # shared covariance
-        elif P.shape[0] > 1 and active(predict_update):  # one covariance per system: compiled
-            mats = self._matrices(self._k)
-            _, _, C, Ct, _, R = mats
-            A = self._A_batch if self._constant else as_batch(At.T)
-            x_new, P_new, nis = predict_update(x, as_batch(P), A, Qd, y - rmul(x, Ct),
-                                               C[None], R[None], valid)
-            if self._constant and valid is self._all_valid and _converged(P_new, P):
-                K, W, _ = gain_kernel(predict_covariance(P, At.T, Qd), C, R)
-                self._steady = (P_new, K, W, Ct)
-            return x_new, P_new, nis
-        P_pred = predict_covariance(P, At.T, Qd)       # A P Aᵀ + G Q Gᵀ
+        A, B, _, Qd, _ = self._matrices(self._k - 1)
+        x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
+        every = valid is self._all_valid and not self._restarting
+        gains = self._gains
+        if gains.regime[0] and every:                  # steady state: P, K, S⁻¹ kept
+            K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
+            x, nis = correct(x, y - x @ self._mats.C.T, K, W)
+            gains.regime[0] = int(bool(np.isfinite(x).all()))
+            return x, P, nis
+        gains.regime[0] = 0
         mats = self._matrices(self._k)
-        x_new, P_new, nis, K, W = self._correct(x, P_pred, y, valid, mats)
-        if K is not None and self._constant and _converged(P_new, P):
-            self._steady = (P_new, K, W, mats[3])
+        x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
+                                                mats)
+        if (gains.regime[1] and every and _converged(P_new, P)
+                and np.isfinite(x_new).all() and np.isfinite(P_new).all()):
+            gains.regime[0] = 1
+            gains.K = np.ascontiguousarray(K.transpose(1, 2, 0))
+            gains.W = np.ascontiguousarray(W.transpose(1, 2, 0))
         return x_new, P_new, nis
 
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
-                 mats: tuple[Any, ...]) -> tuple[Any, ...]:
-        _, _, C, Ct, _, R = mats
-        e = y - rmul(x, Ct)
+                 mats: StepMatrices) -> tuple[Any, ...]:
+        """The update ``(x⁺, P⁺, nis, K, S⁻¹)``; a shared ``P`` is split where some system has
+        no usable measurement (``K`` and ``S⁻¹`` are then not returned)."""
+        C, R = mats.C, mats.R
+        e = y - x @ C.T
         if valid is not self._all_valid:
-            if P.strides[0] == 0 or P.shape[0] != x.shape[0]:
-                P = np.array(np.broadcast_to(P, (x.shape[0], *P.shape[1:])))
+            if P.shape[0] != x.shape[0]:
+                P = np.repeat(P, x.shape[0], axis=0)
             x_new, P_new, _, nis = update_kernel(x, P, e, C, R, valid)
             return x_new, P_new, nis, None, None
         K, W, P_new = gain_kernel(P, C, R)
         x_new, nis = correct(x, e, K, W)
-        if P_new.shape[0] != x.shape[0]:
-            P_new = np.broadcast_to(P_new, (x.shape[0], *P_new.shape[1:]))
         return x_new, P_new, nis, K, W
+
+    # ------------------------------------------------------------------ compiled twin
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        mats = self._matrices(0)
+        self._gains.step(self, mats, mats, self._no_input, y, valid)
+
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        self._gains.step(self, self._matrices(self._k - 1), self._matrices(self._k), u, y,
+                         valid)
+
+
+class LinearGains:
+    """The compiled step of a filter on a linear model's matrices, and what it keeps.
+
+    Used by :class:`KalmanFilter` and by the EKF on a plain :class:`LinearModel`:
+    :func:`~.compiled.kalman.linear_step` on the filter's state, with ``K`` and ``S⁻¹`` of
+    each row of ``P`` held as blocks (``K (n, m, rows)``, ``W (m, m, rows)``) and the
+    ``regime`` ``[steady now, may settle]`` (a time-invariant model's KF may settle).
+    A missing measurement gives every system its own covariance and leaves the regime.
+    """
+
+    def __init__(self, n: int, m: int, may_settle: bool) -> None:
+        self.K, self.W = np.zeros((n, m, 0)), np.zeros((m, m, 0))
+        self.regime = np.array([0, int(may_settle)], dtype=np.int64)
+
+    def step(self, flt: Estimator, prediction: StepMatrices, update: StepMatrices,
+             u: FloatArray, y: FloatArray, valid: np.ndarray) -> None:
+        """One step of ``flt``: predict with ``prediction``'s matrices, update with
+        ``update``'s."""
+        x, P = flt._x, flt._P
+        if valid is not flt._all_valid:                # a missing measurement: no shortcuts
+            self.regime[0] = 0
+            if P.shape[0] < x.shape[0]:
+                P = flt._P = np.repeat(P, x.shape[0], axis=0)
+        if self.K.shape[2] != P.shape[0]:
+            self.regime[0] = 0
+            self.K = np.zeros(self.K.shape[:2] + P.shape[:1])
+            self.W = np.zeros(self.W.shape[:2] + P.shape[:1])
+        compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
+                                    prediction.Qd, update.R, y, valid, flt._predicting(),
+                                    self.K, self.W, self.regime, flt._diverged, flt._nis_run,
+                                    flt._nis, flt._limits)
+
+
+class _Scheduled(Protocol):
+    """A linear model with matrices at each time (``LinearModel``, ``TimeVaryingLinearModel``)."""
+
+    def matrices(self, k: int = 0) -> SystemMatrices: ...
+
+
+class StepMatrices(NamedTuple):
+    """A linear model's matrices as a filter step uses them: ``A, B, C``, ``Qd = G Q Gᵀ``, ``R``."""
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    Qd: FloatArray
+    R: FloatArray
 
 
 def _converged(P_new: FloatArray, P: FloatArray) -> bool:
     """Whether the Riccati recursion has reached round-off: ``max|ΔP| <= 4 eps max|P|``."""
-    if P.shape[0] == 1 or P.strides[0] == 0:
-        P_new, P = P_new[:1], P[:1]
     scale = float(np.abs(P).max())
     return float(np.abs(P_new - P).max()) <= 4.0 * _EPS * scale
 
@@ -349,62 +396,4 @@ def _converged(P_new: FloatArray, P: FloatArray) -> bool:
 _EPS = float(np.finfo(np.float64).eps)
 
 
-class LinearizedKalmanFilter(Estimator):
-    """Paper 000's linearised Kalman filter (LKF): a KF on the perturbation about a nominal path.
-
-    The nominal trajectory starts at the filter's initial state and runs open
-    loop with the inputs the filter is given, ``x_nom[k] = f(x_nom[k-1], u[k-1])``,
-    ``x_nom[0] = x0``. The perturbation ``δx = x − x_nom`` follows
-    ``δx[k] = F(x_nom[k-1], u[k-1]) δx[k-1] + G w``,
-    ``y[k] − h(x_nom[k]) = H(x_nom[k]) δx[k] + v`` (paper 000, Section 2), and the
-    estimate is ``x̂ = x_nom + δx̂``. Unlike the EKF the linearisation point never
-    sees the measurements, so the LKF is exact on linear models and degrades as
-    the truth leaves the nominal path.
-    """
-
-    name = "lkf"
-
-    def _init_batch(self, n_batch: int) -> None:
-        self._x_nom = self._x.copy()
-
-    def _reset_state(self) -> None:
-        self._x_nom = None
-        self._GQGt = self.model.GQGT
-
-    def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return self._correct(x - self._x_nom, P, y, valid)
-
-    def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        model = self.model
-        F = model.F(self._x_nom, u)
-        dx, P = predict_kernel(x - self._x_nom, P, F, self._GQGt)
-        self._x_nom = model.f(self._x_nom, u)
-        return self._correct(dx, P, y, valid)
-
-    def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray | None,
-                        y: FloatArray, valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        # a restarted system's nominal path starts again at its prior
-        self._x_nom[idx] = x
-        return self._correct(np.zeros_like(x), P, y, valid, self._x_nom[idx])
-
-    def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
-                 x_nom: FloatArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
-        x_nom = self._x_nom if x_nom is None else x_nom
-        H = self.model.H(x_nom)
-        e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
-        dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
-        return x_nom + dx, P, nis
-
-    @property
-    def x_nominal(self) -> FloatArray | None:
-        """The nominal trajectory's current point (``None`` before the first step)."""
-        if self._x_nom is None:
-            return None
-        return self._x_nom[0].copy() if self._single else self._x_nom.copy()
-
-
 register_estimator("kf", KalmanFilter)
-register_estimator("lkf", LinearizedKalmanFilter)

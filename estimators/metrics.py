@@ -96,7 +96,7 @@ def mean_nis(innovations: ArrayLike, S: ArrayLike) -> FloatArray:
 
 
 def within_band(values: ArrayLike, dof: int, runs: int = 1, confidence: float = 0.95
-                ) -> FloatArray:
+                ) -> np.ndarray:
     """Which run-averaged values lie in :func:`chi2_band` ``(dof, runs, confidence)``."""
     lo, hi = chi2_band(dof, runs, confidence)
     v = np.asarray(values, dtype=np.float64)

@@ -18,7 +18,7 @@ that may differ from the plant's true ones.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, as_batch, as_covariance, as_matrix, input_batch, positive
 
 Dynamics = Callable[[FloatArray, FloatArray], FloatArray]
+_Model = TypeVar("_Model", bound="StateSpaceModel")
 Output = Callable[[FloatArray], FloatArray]
 
 #: Relative step of the central finite differences, ``eps**(1/3)``: it balances
@@ -173,6 +174,20 @@ class StateSpaceModel(_ModelCore):
             return self._fF(x, u)
         return self.f(x, u), self.F(x, u)
 
+    def f_and_F(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(f(x, u), F(x, u))`` for arrays a filter already holds in the right shapes.
+
+        No argument checks (the filters' hot path; use :meth:`linearize` otherwise);
+        a subclass's own ``f`` or ``F`` is called as it is, and ``F`` falls back to the
+        finite differences of :meth:`F`. A bound method of the model, so a filter
+        holding it copies and pickles with its model.
+        """
+        cls = type(self)
+        fx = self._f(x, u) if cls.f is StateSpaceModel.f else self.f(x, u)
+        if cls.F is StateSpaceModel.F and self._F is not None:
+            return fx, self._F(x, u)
+        return fx, self.F(x, u)
+
     # ------------------------------------------------------------------ properties
 
     @property
@@ -180,7 +195,7 @@ class StateSpaceModel(_ModelCore):
         """Whether ``F`` and ``H`` are analytic (True) or finite differences."""
         return self._F is not None, self._H is not None
 
-    def replace(self, **changes: Any) -> StateSpaceModel:
+    def replace(self: _Model, **changes: Any) -> _Model:
         """A copy with some constructor arguments replaced (e.g. ``Q=...``)."""
         kwargs = self._constructor_kwargs()
         unknown = set(changes) - set(kwargs)
@@ -295,7 +310,7 @@ def _rebuild_linear(kwargs: dict[str, Any]) -> LinearModel:
 
 
 def _central_jacobian(
-    fun: Callable[[FloatArray, FloatArray | None], FloatArray],
+    fun: Callable[[FloatArray, Any], FloatArray],
     x: FloatArray,
     u: FloatArray | None,
 ) -> FloatArray:
@@ -359,7 +374,8 @@ class TimeVaryingLinearModel(StateSpaceModel):
 
     def matrices(self, k: int = 0) -> SystemMatrices:
         """The system matrices at time ``k``, validated for shape and covariance."""
-        get = {key: (val(k) if callable(val) else val) for key, val in self._schedules.items()}
+        get: dict[str, Any] = {key: (val(k) if callable(val) else val)
+                               for key, val in self._schedules.items()}
         A = as_matrix(f"A({k})", get["A"], (None, None))
         n = A.shape[0]
         if A.shape != (n, n):
@@ -387,7 +403,7 @@ class TimeVaryingLinearModel(StateSpaceModel):
     def H(self, x: ArrayLike) -> FloatArray:
         raise TypeError(_TV_MESSAGE)
 
-    def replace(self, **changes: Any) -> StateSpaceModel:
+    def replace(self, **changes: Any) -> TimeVaryingLinearModel:
         kwargs = {**self._schedules, "dt": self.dt, "name": self.name}
         unknown = set(changes) - set(kwargs)
         if unknown:

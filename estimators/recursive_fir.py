@@ -159,11 +159,10 @@ class RecursiveFIRFilter(FIRFilter):
         super()._init_batch(n_batch)
         self._since = np.zeros(n_batch, int)
 
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
-        x = super().step(y, u)
+    def _step_info(self) -> dict[str, Any]:
         r = self._info_reinit
-        self.last_info["reinitialised"] = bool(np.asarray(r).ravel()[0]) if self._single else r
-        return x
+        reinit = bool(np.asarray(r).ravel()[0]) if self._single else np.array(r)
+        return {**super()._step_info(), "reinitialised": reinit}
 
     def _gain_step(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
         nb, n, p, L = self._buf.shape[0], self._n, self._p, self.horizon

@@ -42,12 +42,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _lean, _small
-from ._compiled import active
 from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
-from ._unscented_kernels import cross_moments
 from ._validation import FloatArray
 from .base import Estimator
+from .compiled import unscented as compiled_unscented
 from .extended import model_callables
 from .model import StateSpaceModel
 from .registry import register_estimator
@@ -188,10 +186,6 @@ def _moments(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatArray, Fl
 
 def _mean_covariance(Z: FloatArray, sp: SigmaPoints) -> tuple[FloatArray, FloatArray]:
     """``z̄ = Σ Wᵐ Zᵢ`` and ``Σ Wᶜ (Zᵢ − z̄)(Zᵢ − z̄)ᵀ`` (symmetric) of ``Z (B, N, k)``."""
-    if active(cross_moments):
-        Z = np.ascontiguousarray(Z)
-        mean, _, P = cross_moments(Z, Z, sp.Wm, sp.Wc, True)
-        return mean, P
     mean, D, d, c = _moments(Z, sp)
     return mean, symmetrize(_cross(D, d, c, D, d, c, sp))
 
@@ -260,12 +254,14 @@ class UnscentedKalmanFilter(Estimator):
         jitter: opt-in relative diagonal loading before each factorisation (default 0).
         **options: those of :class:`~fir_gym.estimators.base.Estimator`.
 
-    One system of ``n_x, n_y <= 4`` whose sigma-point weights stay below
-    :data:`~._lean.MAX_WEIGHT` (e.g. α = 1, or cubature points) steps through generated
-    float kernels (:mod:`~._lean`), to round-off the same numbers.
+    The compiled twin (:mod:`~.compiled.unscented`) draws the points, takes the
+    moments and updates in three calls around the model's ``f`` and ``h`` (which see
+    the same ``(B·N, n)`` points as here).
     """
 
     name = "ukf"
+    has_compiled_step = True
+    twin_replaces = (*Estimator.twin_replaces, "_draw", "_correct")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, alpha: float = 1e-3, beta: float = 2.0,
@@ -286,11 +282,14 @@ class UnscentedKalmanFilter(Estimator):
         self.points, self.redraw, self.jitter = points, bool(redraw), float(jitter)
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, _, self._h, _ = model_callables(model)
-        self._GQGt = model.GQGT
+        self._GQGt = np.ascontiguousarray(model.GQGT)
+        self._R = np.ascontiguousarray(model.R)
 
-    def _make_lean(self) -> Any:
-        return _lean.unscented(self) if _small.same_hooks(self, UnscentedKalmanFilter) else None
+    def _init_batch(self, n_batch: int) -> None:
+        #: the input of every sigma point when the caller gives none
+        self._no_point_input = np.zeros((n_batch * self.points.num_points, self.model.n_u))
 
+    # ------------------------------------------------------------------ numpy reference
     def _draw(self, x: FloatArray, P: FloatArray) -> FloatArray:
         return self.points.points(x, matrix_sqrt(P, self.jitter))
 
@@ -315,14 +314,10 @@ class UnscentedKalmanFilter(Estimator):
         n_b, N, n = X.shape
         sp = self.points
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
-        if active(cross_moments):
-            y_hat, S = _mean_covariance(Z, sp)
-            Pxz = cross_moments(np.ascontiguousarray(X), Z, sp.Wm, sp.Wc, False)[2]
-        else:
-            y_hat, DZ, dz, cz = _moments(Z, sp)
-            _, DX, dx, cx = _moments(X, sp)
-            S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
-            Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        y_hat, DZ, dz, cz = _moments(Z, sp)
+        _, DX, dx, cx = _moments(X, sp)
+        S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
+        Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
         S = S + self.model.R
         W = spd_inverse(S)
         K = Pxz @ W
@@ -335,6 +330,39 @@ class UnscentedKalmanFilter(Estimator):
             P_new = np.where(valid[:, None, None], P_new, P)
             nis = np.where(valid, nis, np.nan)
         return x_new, P_new, nis
+
+
+    # ------------------------------------------------------------------ compiled twin
+    def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        x, P, sp = self._x, self._P, self.points
+        assert x is not None and P is not None
+        X = compiled_unscented.sigma_points(x, P, sp.xi, self.jitter)
+        self._compiled_correct(x, P, X, y, valid)
+
+    def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
+                                 ) -> None:
+        x, P, sp = self._x, self._P, self.points
+        assert x is not None and P is not None
+        n_b, n = x.shape
+        N = sp.num_points
+        X = compiled_unscented.sigma_points(x, P, sp.xi, self.jitter)
+        U = self._no_point_input if u is self._no_input else np.repeat(u, N, axis=0)
+        with np.errstate(all="ignore"):
+            Xf = self._f(X.reshape(n_b * N, n), U).reshape(n_b, N, n)
+        x_pred, P_pred, X_pred = compiled_unscented.predict(
+            X, Xf, x, P, sp.Wm, sp.Wc, self._GQGt, self._predicting(), self.redraw, sp.xi,
+            self.jitter)
+        self._compiled_correct(x_pred, P_pred, X_pred, y, valid)
+
+    def _compiled_correct(self, x: FloatArray, P: FloatArray, X: FloatArray, y: FloatArray,
+                          valid: np.ndarray) -> None:
+        n_b, N, n = X.shape
+        sp = self.points
+        with np.errstate(all="ignore"):
+            Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
+        compiled_unscented.update(x, P, X, Z, y, sp.Wm, sp.Wc, self._R, valid, self._x,
+                                  self._P, self._diverged, self._nis_run, self._nis,
+                                  self._limits)
 
 
 register_estimator("ukf", UnscentedKalmanFilter)

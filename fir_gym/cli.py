@@ -24,6 +24,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from . import __version__
 from .tables import format_table
@@ -40,7 +41,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
     rows = []
     for env_id in ENV_IDS:
-        plant = gym.make(env_id).unwrapped
+        plant: Any = gym.make(env_id).unwrapped
         rows.append([env_id, gym.spec(env_id).max_episode_steps, ", ".join(plant.state_names),
                      ", ".join(plant.measurement_names), ", ".join(plant.action_names)])
     print(format_table(["environment", "max steps", "state", "measurement", "action"], rows))

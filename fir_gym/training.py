@@ -16,7 +16,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -131,12 +131,12 @@ def evaluate(run_dir: str | Path, *, episodes: int = 20, seed: int = 10_000) -> 
     venv = _vec_env(config, seed, None, 1)
     venv = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), venv)
     venv.training, venv.norm_reward = False, False
-    cls = {"ppo": PPO, "sac": SAC}[config.algo]
+    cls: Any = {"ppo": PPO, "sac": SAC}[config.algo]
     model = cls.load(run_dir / "model.zip", device="cpu")
     returns, _ = evaluate_policy(model, venv, n_eval_episodes=episodes, deterministic=True,
                                  return_episode_rewards=True, warn=False)
     venv.close()
-    return Evaluation([float(r) for r in returns])
+    return Evaluation([float(r) for r in cast("list[float]", returns)])
 
 
 def learning_curve(run_dir: str | Path, bins: int = 20) -> tuple[np.ndarray, np.ndarray]:

@@ -3,34 +3,38 @@
 Each is one call, timed in the same alternating blocks as what it bounds:
 :func:`numpy_path` (a step with the compiled kernels off), :func:`mujoco_stepper`
 (MuJoCo's own steps of one PendulumSlider-v0 env step), :func:`trivial_ekf_step`
-(the filter's fixed cost) and :func:`model_evaluation` (what an EKF step must evaluate
-of a plant's model).
+(the filter's fixed cost), :func:`trivial_ekf_kernel` (that step's compiled kernel
+alone), :func:`kalman_kernels_skipped` (the step without its kernel: its Python side) and
+:func:`model_evaluation` (what an EKF step must evaluate of a plant's model).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from fir_gym.estimators import _compiled
+from fir_gym.estimators import compiled
 
 
 def numpy_path(step: Any, k: int) -> Any:
     """``step(k)`` with the compiled kernels switched off (the numpy reference path)."""
-    _compiled.ENABLED = False
+    compiled.ENABLED = False
     try:
         return step(k)
     finally:
-        _compiled.ENABLED = True
+        compiled.ENABLED = True
 
 
 def mujoco_stepper(friction: str) -> Any:
     """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
     import mujoco
 
-    env = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
+    env: Any = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
     env.reset(seed=0)
     m, d, nstep = env.mj_model, env.mj_data, env.params["frame_skip"]
     rk4 = env._stage_rk4
@@ -51,7 +55,45 @@ def trivial_ekf_step(n_batch: int) -> Any:
     ekf = ExtendedKalmanFilter(model, x0=np.zeros((n_batch, 1)))
     y = np.zeros((n_batch, 1))
     ekf.step(y)
-    return lambda: ekf.step(y)
+
+    def step() -> Any:
+        return ekf.step(y)
+    step.estimator = ekf                                  # type: ignore[attr-defined]
+    return step
+
+
+def trivial_ekf_kernel(n_batch: int) -> Any:
+    """The compiled kernel of :func:`trivial_ekf_step`'s step called alone, with the arguments
+    that step hands it (``compiled.kalman.predict_update``; its numba dispatch included)."""
+    from fir_gym.estimators.compiled import kalman
+
+    step = trivial_ekf_step(n_batch)
+    ekf = step.estimator
+    x, one = ekf._x, np.ones((n_batch, 1, 1))
+    y = np.zeros((n_batch, 1))
+    args = (x, ekf._P, x.copy(), one, ekf._GQGt, y, x.copy(), one, ekf._R_batch,
+            ekf._all_valid, ekf._all_predict, ekf._diverged, ekf._nis_run, ekf._nis,
+            ekf._limits)
+    return lambda: kalman.predict_update(*args)
+
+
+@contextmanager
+def kalman_kernels_skipped() -> Iterator[None]:
+    """A block in which the EKF's compiled kernels are no-ops: what a step then costs is its
+    Python side alone (checks, model calls, the kernel's arguments, copies)."""
+    from fir_gym.estimators import extended
+
+    real = extended.compiled_kalman
+    extended.compiled_kalman = SimpleNamespace(           # type: ignore[assignment]
+        predict_update=_no_op, linear_step=_no_op)
+    try:
+        yield
+    finally:
+        extended.compiled_kalman = real
+
+
+def _no_op(*args: Any) -> None:
+    return None
 
 
 def model_evaluation(estimator: Any) -> Any:

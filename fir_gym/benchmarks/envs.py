@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 
@@ -24,7 +25,7 @@ from ..tables import format_table
 from ._timing import per_call, stepper, vector_stepper
 
 
-def time_single(env_id: str, steps: int, repeats: int, **kwargs: object) -> float:
+def time_single(env_id: str, steps: int, repeats: int, **kwargs: Any) -> float:
     """Seconds per step of one unwrapped env (reset when an episode ends)."""
     return per_call(stepper(env_id, **kwargs), steps, repeats, warmup=steps)
 

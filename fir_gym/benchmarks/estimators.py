@@ -59,7 +59,7 @@ def _rollout(env_id: str, steps: int) -> tuple[np.ndarray, np.ndarray]:
     env = gym.make(env_id)
     rng = np.random.default_rng(0)
     y, _ = env.reset(seed=0)
-    Y, U = [y], [np.zeros(env.action_space.shape)]
+    Y, U = [y], [np.zeros(env.action_space.shape or ())]
     while len(Y) < steps:
         a = 0.3 * rng.uniform(-1, 1, size=env.action_space.shape)
         y, _, term, trunc, info = env.step(a)

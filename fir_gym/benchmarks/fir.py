@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -121,15 +122,15 @@ def growth(horizons: tuple[int, ...] = (25, 50, 100, 200, 400, 800),
     rows, bank_rows = [], []
     for N in horizons:
         win = make_window(A, C, 0.1 * np.eye(n), np.eye(p), N)
-        tc = per_call(lambda win=win: two_stage_gain(win), 2, 5, warmup=0)
-        ta = per_call(lambda win=win: batch_gain(win), 1, 3 if N < 800 else 2, warmup=0)
+        tc = per_call(partial(two_stage_gain, win), 2, 5, warmup=0)
+        ta = per_call(partial(batch_gain, win), 1, 3 if N < 800 else 2, warmup=0)
         rows.append((N, tc, ta))
     y = np.zeros(p)
     for N in bank_horizons:
         f = FIRFilter(tv, horizon=N)
         for _ in range(N + 2):
             f.step(y)
-        bank_rows.append((N, per_call(lambda f=f: f.step(y), 20, 5, warmup=0)))
+        bank_rows.append((N, per_call(partial(f.step, y), 20, 5, warmup=0)))
     R, Rb = np.array(rows), np.array(bank_rows)
     sel, selb = R[:, 0] >= fit_from, Rb[:, 0] >= bank_fit_from
     return {"rows": rows, "bank_rows": bank_rows,
@@ -186,7 +187,7 @@ def linear_speed(horizon: int = 10) -> dict[str, float]:
     return {"fir_step_us": per_call(lambda: f.step(y), 2000, 5, warmup=0) * 1e6}
 
 
-def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, np.ndarray]:
+def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, Any]:
     """Max |EFIR error| on Orbit-v0 in paper 000's setting, for both nominals, noisy and not.
 
     N = 10, filter and nominal start [7.997, 1.992], zero thrust, R = 1e-3, model
@@ -198,7 +199,8 @@ def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, np.ndarray]:
     import fir_gym  # noqa: F401  (registers the environments)
 
     env = gym.make("fir_gym/Orbit-v0", max_episode_steps=steps)
-    model = env.unwrapped.model
+    plant: Any = env.unwrapped
+    model = plant.model
     y, info = env.reset(seed=seed)
     keys = [(nom, nf) for nom in ("open-loop", "reanchor") for nf in (False, True)]
     filters = {key: ExtendedFIRFilter(model, horizon=10, form="predictor", nominal=key[0],
@@ -216,8 +218,10 @@ def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, np.ndarray]:
                     first[nom, nf] = np.maximum(first[nom, nf], err)
         y, _, term, trunc, info = env.step(np.zeros(1))
         done, k = term or trunc, k + 1
-    return {"steps": np.array(k), "worst": worst, "first1000": first,       # type: ignore
-            "nominal_drift": filters["open-loop", False].x_nominal - info["state"]}
+    nominal = filters["open-loop", False].x_nominal
+    assert nominal is not None
+    return {"steps": np.array(k), "worst": worst, "first1000": first,
+            "nominal_drift": nominal - info["state"]}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -37,8 +37,9 @@ def run(num_envs: int = 64, steps: int = 100, repeats: int = 5, estimator: str =
             wrapped = _time(VectorEstimatorObservation(
                 gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode), estimator),
                 steps, repeats)
-            rows.append([env_id, "native" if mode == "vector_entry_point" else mode,
-                         1e6 * bare, 1e6 * wrapped, wrapped / bare])
+            row: list[object] = [env_id, "native" if mode == "vector_entry_point" else mode,
+                                 1e6 * bare, 1e6 * wrapped, wrapped / bare]
+            rows.append(row)
     return rows
 
 

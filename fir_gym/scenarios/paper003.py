@@ -150,7 +150,7 @@ def paper_input(k: np.ndarray | int) -> np.ndarray:
 def episode(task: tuple[int, float] | tuple[int, float, Cell]) -> tuple[np.ndarray, np.ndarray]:
     """One seeded episode of a cell (default :data:`QUIET`, ``seconds`` long): ``(y, x)``,
     each ``(K+1, 4)``."""
-    seed, seconds, cell = (*task, QUIET) if len(task) == 2 else task   # type: ignore[misc]
+    seed, seconds, cell = (*task, QUIET) if len(task) == 2 else task
     env = make_env(cell)
     y0, info = env.reset(seed=seed, options={"state": [env.x_rest, 0.0, cell.theta0, 0.0]})
     ys, xs = [y0], [info["state"]]

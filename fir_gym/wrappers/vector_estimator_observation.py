@@ -101,9 +101,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         env: Any = self.env                    # its reset takes a list of seeds too
         y, info = env.reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
-        x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1))
+        Y = self._measurements(y)
+        x_hat = self.estimator.step(Y)
         self._prev_done[:] = False
-        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
+        self._last = (x_hat.copy(), Y)
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
@@ -112,10 +113,10 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             self.estimator.restart(self._prev_done)
         applied = info.get("action", actions)
         u = np.asarray(applied, dtype=np.float64).reshape(self.num_envs, -1)
-        x_hat = self.estimator.step(np.asarray(y, dtype=np.float64).reshape(self.num_envs, -1),
-                                    u)
+        Y = self._measurements(y)
+        x_hat = self.estimator.step(Y, u)
         self._prev_done = np.logical_or(terminated, truncated)
-        self._last = (x_hat.copy(), np.array(y, dtype=np.float64).reshape(self.num_envs, -1))
+        self._last = (x_hat.copy(), Y)
         return self._observe(x_hat, y), reward, terminated, truncated, \
             self._annotate(info, x_hat)
 
@@ -134,6 +135,11 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
                                 label=self.estimator_label, diverged=bool(diverged[i]),
                                 view=view)
             for i, (frame, (plant, view)) in enumerate(zip(frames, plants, strict=True)))
+
+    def _measurements(self, y: Any) -> NDArray[np.float64]:
+        """The sub-envs' measurements as one fresh ``(num_envs, n_y)`` float64 array: the
+        estimator's input, kept for :meth:`render` (one conversion per step, not two)."""
+        return np.array(y, dtype=np.float64).reshape(self.num_envs, -1)
 
     def _observe(self, x_hat: NDArray[np.float64], y: Any) -> Any:
         if self.observation_kind == "estimate":

@@ -7,7 +7,7 @@ import pytest
 
 import fir_gym  # noqa: F401
 from fir_gym.envs._mujoco_rk4 import StageRK4
-from fir_gym.estimators import _compiled
+from fir_gym.estimators import compiled
 
 
 def test_paper_friction_law_equals_mujoco_with_the_reference_force_applied():
@@ -102,7 +102,7 @@ def test_van_der_pol_small_batches_row_by_row_equal_the_batched_loop(monkeypatch
     """Batches of up to SMALL_BATCH rows run the float loop row by row: bit for bit the
     numpy loop over the whole batch (both without the compiled loop)."""
     from fir_gym.envs import van_der_pol
-    monkeypatch.setattr(_compiled, "ENABLED", False)
+    monkeypatch.setattr(compiled, "ENABLED", False)
     dyn = van_der_pol.VanDerPolDynamics(1.0, 0.1, 100, 5.0)
     rng = np.random.default_rng(1)
     B = 5
@@ -120,7 +120,7 @@ def test_van_der_pol_small_batches_row_by_row_equal_the_batched_loop(monkeypatch
 @pytest.mark.parametrize("jacobian", [False, True])
 def test_orbit_small_batches_row_by_row_equal_the_batched_loop(monkeypatch, jacobian):
     from fir_gym.envs import orbit
-    monkeypatch.setattr(_compiled, "ENABLED", False)
+    monkeypatch.setattr(compiled, "ENABLED", False)
     dyn = gym.make("fir_gym/Orbit-v0").unwrapped.model
     rng = np.random.default_rng(2)
     x = np.array([8.0, 2.0]) + 0.1 * rng.normal(size=(5, 2))
@@ -170,7 +170,7 @@ def on_both_paths(monkeypatch, fn, *args):
     """``fn(*args)`` with the compiled kernels on, then off (their numpy/Python paths)."""
     out = []
     for enabled in (True, False):
-        monkeypatch.setattr(_compiled, "ENABLED", enabled)
+        monkeypatch.setattr(compiled, "ENABLED", enabled)
         out.append(fn(*args))
     return out
 
@@ -207,7 +207,7 @@ def test_van_der_pol_rollout_is_the_same_with_and_without_the_compiled_loop(monk
     pytest.importorskip("numba")
     runs = []
     for enabled in (True, False):
-        monkeypatch.setattr(_compiled, "ENABLED", enabled)
+        monkeypatch.setattr(compiled, "ENABLED", enabled)
         env = gym.make("fir_gym/VanDerPol-v0")
         obs, _ = env.reset(seed=4)
         trace = [obs]

@@ -11,10 +11,10 @@ import scipy.stats
 from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearModel
 from fir_gym.estimators.kalman import (
     KalmanFilter,
-    LinearizedKalmanFilter,
     kf_predict,
     kf_update,
 )
+from fir_gym.estimators.linearized import LinearizedKalmanFilter
 from fir_gym.estimators.registry import estimator_names, make_estimator
 
 
@@ -83,7 +83,7 @@ def test_steady_state_shortcut_equals_full_recursion():
     for _k in range(600):
         y, u = rng.normal(size=2), rng.normal(size=1)
         np.testing.assert_allclose(a.step(y, u), b.step(y, u), rtol=1e-12, atol=1e-13)
-    assert a._steady is not None                           # the shortcut was exercised
+    assert a.steady_state                                  # the shortcut was exercised
     np.testing.assert_allclose(a.P, b.P, rtol=1e-12, atol=1e-15)
 
 

@@ -1,0 +1,298 @@
+"""The Kalman family's step, compiled: prediction, Joseph-form update and the watch in one call.
+
+The twin of :func:`~fir_gym.estimators.kalman.predict_covariance` followed by
+:func:`~fir_gym.estimators.kalman.update_kernel` and ``Estimator._accept`` —
+
+    P⁻ = F P Fᵀ + Q,   S = H P⁻ Hᵀ + R,   K = P⁻ Hᵀ S⁻¹,   x⁺ = x⁻ + K (y − ŷ),
+    P⁺ = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ (symmetrised),   NIS = eᵀ S⁻¹ e
+
+— on blocks of systems (:mod:`.linalg`), written in place into the filter's state and
+booked by :func:`.watch.verdict`. The numpy references' rules hold: a system whose
+``S`` is not positive definite gets NaN (so the watch keeps its last estimate and flags
+it), a system without a usable measurement (``valid`` False) keeps ``x⁻, P⁻`` with a NaN
+NIS, a system whose ``predict`` is False takes no prediction (the first step after a
+(re)start: an update of its prior).
+
+Two entry points, built from the same block pieces (:func:`predict_block`,
+:func:`gain_block`, :func:`finish`):
+
+* :func:`predict_update` — the EKF's and LKF's step: the caller evaluates the model
+  (``x⁻ = f(x, u)``, ``F``, ``ŷ = h(x⁻)``, ``H``), the kernel does the covariance algebra;
+* :func:`linear_step` — a linear model's step with its matrices (KF, and the EKF on a
+  plain :class:`~fir_gym.estimators.LinearModel`): ``x⁻ = A x + B u`` and ``ŷ = C x⁻`` in the
+  kernel, and the KF's two exact shortcuts — one covariance shared by a batch started
+  from one prior, and the steady state (``P``, ``K``, ``S⁻¹`` kept once the Riccati
+  recursion has reached round-off).
+
+Shapes: ``x (B, n)``, ``P (B, n, n)`` (``(1, n, n)`` shared, :func:`linear_step` only),
+matrices ``(B | 1, r, c)`` (1: shared by all systems), ``y, ŷ (B, m)``, ``valid, predict
+(B,)``, the watch's ``diverged, nis_run, nis (B,)`` and ``limits`` (:mod:`.watch`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import jit
+from .linalg import CHUNK, load, mul, spd_inverse, symmetrize_sum
+from .watch import verdict
+
+EPS = float(np.finfo(np.float64).eps)
+
+
+@jit
+def scratch(n: int, m: int, c: int) -> tuple[np.ndarray, ...]:
+    """The blocks of one step on ``c`` systems, carved from one allocation: ``Ps, Fs, FP, Pm,
+    Qs, IKH, T, U`` (``n x n``), ``Hs`` (``m x n``), ``PHt, K, KR`` (``n x m``), ``Rs, S, W,
+    L`` (``m x m``)."""
+    nn, nm, mm = n * n * c, n * m * c, m * m * c
+    buf = np.empty(8 * nn + 4 * nm + 4 * mm)
+    o = 8 * nn + 4 * nm
+    return (buf[:nn].reshape(n, n, c), buf[nn:2 * nn].reshape(n, n, c),
+            buf[2 * nn:3 * nn].reshape(n, n, c), buf[3 * nn:4 * nn].reshape(n, n, c),
+            buf[4 * nn:5 * nn].reshape(n, n, c), buf[5 * nn:6 * nn].reshape(n, n, c),
+            buf[6 * nn:7 * nn].reshape(n, n, c), buf[7 * nn:8 * nn].reshape(n, n, c),
+            buf[8 * nn:8 * nn + nm].reshape(m, n, c),
+            buf[8 * nn + nm:8 * nn + 2 * nm].reshape(n, m, c),
+            buf[8 * nn + 2 * nm:8 * nn + 3 * nm].reshape(n, m, c),
+            buf[8 * nn + 3 * nm:o].reshape(n, m, c),
+            buf[o:o + mm].reshape(m, m, c), buf[o + mm:o + 2 * mm].reshape(m, m, c),
+            buf[o + 2 * mm:o + 3 * mm].reshape(m, m, c),
+            buf[o + 3 * mm:o + 4 * mm].reshape(m, m, c))
+
+
+@jit
+def predict_block(Ps: np.ndarray, Fs: np.ndarray, Qs: np.ndarray, nb: int, FP: np.ndarray,
+                  Pm: np.ndarray) -> None:
+    """``P⁻ = F P Fᵀ + Q`` (symmetrised) on a block."""
+    mul(Ps, Fs, FP, nb, True)                        # P Fᵀ
+    mul(Fs, FP, Pm, nb, False)                       # F P Fᵀ
+    symmetrize_sum(Pm, Qs, nb)                       # + Q, symmetrised
+
+
+@jit
+def gain_block(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, nb: int, PHt: np.ndarray,
+               S: np.ndarray, W: np.ndarray, L: np.ndarray, ok: np.ndarray, K: np.ndarray,
+               IKH: np.ndarray, T: np.ndarray, U: np.ndarray, KR: np.ndarray) -> None:
+    """The covariance half of the update on a block: ``W = S⁻¹`` (``ok`` where ``S`` is PD),
+    ``K = P⁻ Hᵀ S⁻¹`` and the Joseph-form ``U = P⁺``."""
+    n, m = Pm.shape[0], Hs.shape[0]
+    mul(Pm, Hs, PHt, nb, True)                       # P⁻ Hᵀ
+    mul(Hs, PHt, S, nb, False)                       # H P⁻ Hᵀ
+    for i in range(m):                               # S = H P⁻ Hᵀ + R
+        for j in range(m):
+            for t in range(nb):
+                S[i, j, t] += Rs[i, j, t]
+    spd_inverse(S, W, L, ok, nb)
+    mul(PHt, W, K, nb, False)                        # K = P⁻ Hᵀ S⁻¹
+    mul(K, Hs, IKH, nb, False)                       # I − K H
+    for i in range(n):
+        for j in range(n):
+            for t in range(nb):
+                IKH[i, j, t] = (1.0 if i == j else 0.0) - IKH[i, j, t]
+    mul(Pm, IKH, T, nb, True)                        # P⁻ (I − K H)ᵀ
+    mul(IKH, T, U, nb, False)                        # (I − K H) P⁻ (I − K H)ᵀ
+    mul(K, Rs, KR, nb, False)
+    mul(KR, K, T, nb, True)                          # K R Kᵀ
+    symmetrize_sum(U, T, nb)                         # Joseph form, symmetrised
+
+
+@jit
+def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
+           ok: np.ndarray, K: np.ndarray, W: np.ndarray, Pm: np.ndarray, Pp: np.ndarray,
+           c0: int, shared: bool, store_P: bool, x: np.ndarray, P: np.ndarray,
+           diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray
+           ) -> bool:
+    """The state half of the update and the watch for systems ``b0 .. b0+nb``: ``x⁺ = x⁻ + K
+    e`` and ``NIS = eᵀ W e`` (``W = S⁻¹``), then ``x⁺`` and ``P⁺ = Pp`` (``P⁻ = Pm`` without a
+    usable measurement) stored into ``x`` (and ``P`` with ``store_P``) where both are
+    finite. Column ``t`` of the blocks ``Xm (n, ·)`` (``x⁻``) and ``E (m, ·)`` (innovations)
+    belongs to system ``b0 + t``; of ``ok``, ``K``, ``W``, ``Pm``, ``Pp`` column ``c0 + t`` (``0``
+    for all where ``shared``). Returns whether every estimate was stored."""
+    n, m = Xm.shape[0], E.shape[0]
+    nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
+    xn = np.empty(n)
+    every = True
+    for t in range(nb):
+        b, col = b0 + t, 0 if shared else c0 + t
+        usable = valid[b]                            # no measurement: keep x⁻, P⁻
+        q = np.nan
+        for i in range(n):
+            xn[i] = Xm[i, t]
+        if usable and ok[col]:
+            q = 0.0                                  # NIS = eᵀ S⁻¹ e
+            for i in range(m):
+                for k in range(m):
+                    q += E[i, t] * W[i, k, col] * E[k, t]
+            for i in range(n):                       # x⁺ = x⁻ + K e
+                v = 0.0
+                for k in range(m):
+                    v += K[i, k, col] * E[k, t]
+                xn[i] += v
+        elif usable:                                 # S not positive definite
+            xn[0] = np.nan
+        finite = True
+        trace = 0.0
+        for i in range(n):
+            trace += Pp[i, i, col] if usable else Pm[i, i, col]
+            finite = finite and np.isfinite(xn[i])
+            for j in range(n):
+                finite = finite and np.isfinite(Pp[i, j, col] if usable else Pm[i, j, col])
+        nis_run[b], blown = verdict(finite, trace, q, usable, True, nis_run[b], nis_limit,
+                                    patience, max_trace)
+        if blown:
+            diverged[b] = True
+        if finite:
+            for i in range(n):
+                x[b, i] = xn[i]
+                if store_P:
+                    for j in range(n):
+                        P[b, i, j] = Pp[i, j, col] if usable else Pm[i, j, col]
+        nis[b] = q
+        every = every and finite
+    return every
+
+
+@jit
+def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
+                   Q: np.ndarray, y: np.ndarray, hx: np.ndarray, H: np.ndarray,
+                   R: np.ndarray, valid: np.ndarray, predict: np.ndarray,
+                   diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray,
+                   limits: np.ndarray) -> None:
+    """One step of every system, in place: ``x⁻ = xp`` (the caller's ``f(x, u)``; ``x`` itself
+    where ``predict`` is False), ``P⁻ = F P Fᵀ + Q`` where ``predict``, the update with
+    ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then the watch."""
+    n_b, n = x.shape
+    m = y.shape[1]
+    if not (P.shape[0] == xp.shape[0] == y.shape[0] == hx.shape[0] == valid.shape[0]
+            == predict.shape[0] == diverged.shape[0] == nis_run.shape[0] == nis.shape[0] == n_b
+            and F.shape[0] in (1, n_b) and H.shape[0] in (1, n_b) and R.shape[0] in (1, n_b)):
+        raise ValueError("predict_update: the arrays must have a row per system (F, H, R: "
+                         "one row for all)")
+    c = min(CHUNK, n_b)
+    Ps, Fs, FP, Pm, Qs, IKH, T, U, Hs, PHt, K, KR, Rs, S, W, L = scratch(n, m, c)
+    ok = np.empty(c, dtype=np.bool_)
+    Xm, E = np.empty((n, c)), np.empty((m, c))
+    load(Q.reshape(1, n, n), 0, c, Qs)
+    for b0 in range(0, n_b, c):
+        nb = min(c, n_b - b0)
+        load(P, b0, nb, Ps)
+        load(F, b0, nb, Fs)
+        load(H, b0, nb, Hs)
+        load(R, b0, nb, Rs)
+        predict_block(Ps, Fs, Qs, nb, FP, Pm)
+        for t in range(nb):
+            if not predict[b0 + t]:                  # a first step: the prior as it is
+                for i in range(n):
+                    for j in range(n):
+                        Pm[i, j, t] = Ps[i, j, t]
+        gain_block(Pm, Hs, Rs, nb, PHt, S, W, L, ok, K, IKH, T, U, KR)
+        for t in range(nb):
+            for i in range(n):
+                Xm[i, t] = xp[b0 + t, i]
+            for i in range(m):
+                E[i, t] = y[b0 + t, i] - hx[b0 + t, i]
+        finish(b0, nb, Xm, E, valid, ok, K, W, Pm, U, 0, False, True, x, P, diverged,
+               nis_run, nis, limits)
+
+
+@jit
+def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: np.ndarray,
+                C: np.ndarray, Q: np.ndarray, R: np.ndarray, y: np.ndarray,
+                valid: np.ndarray, predict: np.ndarray, gain_K: np.ndarray,
+                gain_W: np.ndarray, regime: np.ndarray, diverged: np.ndarray,
+                nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray) -> None:
+    """One step of a linear model's filter, in place: ``x⁻ = A x + B u`` (``u (B | 1, n_u)``)
+    and ``P⁻ = A P Aᵀ + Q`` where ``predict``, the update with ``e = y − C x⁻``, the watch.
+
+    ``P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system (every
+    measurement must then be usable and ``predict`` the same for all). ``gain_K (n, m,
+    rows of P)`` and ``gain_W (m, m, rows)`` receive ``K`` and ``S⁻¹`` of each row of ``P``
+    (held as blocks). ``regime[0] == 1`` is the steady state: ``P`` and the gains stay,
+    only the states are updated (every measurement usable, every system predicting);
+    with ``regime[1] == 1`` (a time-invariant model) a step enters it when ``max |P⁺ −
+    P| <= 4 eps max |P|`` (the recursion then only wanders by a few ulps, often in a
+    cycle, never settling bit for bit), and a repaired (non-finite) estimate leaves it.
+    """
+    n_b, n = x.shape
+    n_p, m, n_u = P.shape[0], y.shape[1], u.shape[1]
+    if not (n_p in (1, n_b) and gain_K.shape[2] == gain_W.shape[2] == n_p
+            and u.shape[0] in (1, n_b) and y.shape[0] == valid.shape[0] == predict.shape[0]
+            == diverged.shape[0] == nis_run.shape[0] == nis.shape[0] == n_b):
+        raise ValueError("linear_step: the arrays must have a row per system (P and the gains: "
+                         "or one row for all; u: or one for all)")
+    steady = regime[0] == 1
+    Pm_all, Pp_all = np.empty((n, n, n_p)), np.empty((n, n, n_p))
+    ok_all = np.ones(n_p, dtype=np.bool_)
+    change, scale = 0.0, 0.0
+    if steady:                                       # P⁺ = P⁻ = P
+        for r in range(n_p):
+            for i in range(n):
+                for j in range(n):
+                    Pm_all[i, j, r] = P[r, i, j]
+                    Pp_all[i, j, r] = P[r, i, j]
+    else:                                            # the covariance half, per row of P
+        c = min(CHUNK, n_p)
+        Ps, As, FP, _, Qs, IKH, T, _, Cs, PHt, _, KR, Rs, S, _, L = scratch(n, m, c)
+        ok = np.empty(c, dtype=np.bool_)
+        load(Q.reshape(1, n, n), 0, c, Qs)
+        load(A.reshape(1, n, n), 0, c, As)
+        load(C.reshape(1, m, n), 0, c, Cs)
+        load(R.reshape(1, m, m), 0, c, Rs)
+        for b0 in range(0, n_p, c):
+            nb = min(c, n_p - b0)
+            Pm, U = Pm_all[:, :, b0:b0 + nb], Pp_all[:, :, b0:b0 + nb]
+            K, W = gain_K[:, :, b0:b0 + nb], gain_W[:, :, b0:b0 + nb]
+            load(P, b0, nb, Ps)
+            predict_block(Ps, As, Qs, nb, FP, Pm)
+            for t in range(nb):
+                if not predict[b0 + t]:
+                    for i in range(n):
+                        for j in range(n):
+                            Pm[i, j, t] = Ps[i, j, t]
+            gain_block(Pm, Cs, Rs, nb, PHt, S, W, L, ok, K, IKH, T, U, KR)
+            for t in range(nb):
+                r = b0 + t
+                ok_all[r] = ok[t]
+                for i in range(n):
+                    for j in range(n):
+                        scale = max(scale, abs(P[r, i, j]))
+                        change = max(change, abs(U[i, j, t] - P[r, i, j]))
+    shared = n_p < n_b
+    Xm, E = np.empty((n, n_b)), np.empty((m, n_b))
+    settling = regime[1] == 1
+    # the state half: x⁻ and e of every system, then one finish call (a call per block of
+    # 64, 19 arguments each, cost the converged KF ~15 ns per system-step of its ~45)
+    for b in range(n_b):
+        ub = 0 if u.shape[0] == 1 else b
+        settling = settling and valid[b] and predict[b]
+        for i in range(n):
+            if predict[b]:
+                v = 0.0
+                for k in range(n):
+                    v += A[i, k] * x[b, k]
+                for k in range(n_u):
+                    v += B[i, k] * u[ub, k]
+                Xm[i, b] = v
+            else:
+                Xm[i, b] = x[b, i]
+        for i in range(m):
+            v = 0.0
+            for k in range(n):
+                v += C[i, k] * Xm[k, b]
+            E[i, b] = y[b, i] - v
+    repaired = not finish(0, n_b, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, 0,
+                          shared, not (shared or steady), x, P, diverged, nis_run, nis, limits)
+    if shared and not steady:                        # one covariance, stored where finite
+        finite = ok_all[0]
+        for i in range(n):
+            for j in range(n):
+                finite = finite and np.isfinite(Pp_all[i, j, 0])
+        if finite:
+            for i in range(n):
+                for j in range(n):
+                    P[0, i, j] = Pp_all[i, j, 0]
+    if steady:
+        regime[0] = 0 if repaired else 1
+    else:
+        regime[0] = 1 if settling and not repaired and change <= 4.0 * EPS * scale else 0
