@@ -21,8 +21,9 @@ whether an estimate-fed controller matches the true-state one, whether a filter 
 memory and whether LQG beats the learned controllers. Learning curves per plant go to
 ``OUT/figures``.
 
-Budget: the steps per plant (:data:`PLANTS`) are chosen so that the full run, 115 jobs,
-takes about 90 minutes on 2 cores (``--backend joblib``); ``--quick`` (2 seeds, a few
+Budget: the steps per plant (:data:`PLANTS`) are chosen so that the full run, 108 jobs
+(3 plants × (7 learned kinds × 5 seeds + the LQG)), takes about 90 minutes on 2 cores
+(``--backend joblib``); ``--quick`` (2 seeds, a few
 thousand steps, 2 evaluation episodes) checks the whole pipeline in under 3 minutes
 and its numbers mean nothing.
 """
