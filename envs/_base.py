@@ -46,10 +46,23 @@ class does what must be identical everywhere:
   ends the episode (``terminated=True``) with ``info["simulation_failure"]`` naming
   the cause (:data:`SIMULATION_FAILURES`). The
   plant then stays at the last valid state (``info["state"]`` and :attr:`state`),
-  the observation repeats the last one, the reward is that of staying at the last
-  valid state under the action, and per-step extras that are not finite are left
-  out of ``info``. ``render()`` of a state that is not valid (set by hand) draws the
-  finite parts of the scene inside a red frame.
+  the observation repeats the last one, the reward is the terminal penalty (below:
+  a failed step is a termination like any other, so breaking the simulation never
+  pays), and per-step extras that are not finite are left out of ``info``.
+  ``render()`` of a state that is not valid (set by hand) draws the finite parts of
+  the scene inside a red frame.
+* **Rewards and episode end (honest tasks).** Every per-step reward is a *saturated
+  cost*: ``-min(cost, cost_cap)`` (a non-finite cost counts as ``cost_cap``), so it
+  is finite and never below ``-cost_cap``, the plant's documented worst rate. The
+  step on which a plant terminates (it left its physical domain) is paid
+  ``-cost_cap * (1 + steps left to max_episode_steps)``: the terminal step and every
+  step the episode would still have run, at the worst rate. Ending an episode early
+  therefore never improves its return. ``max_episode_steps`` is a constructor
+  argument defaulting to the registered time limit (``default_max_episode_steps``);
+  ``gym.make(id, max_episode_steps=N)`` sets only Gymnasium's ``TimeLimit``, so a
+  shorter ``N`` makes the penalty count more steps than remain (still honest); for a
+  longer one set ``env.unwrapped.max_episode_steps = N`` too (fir-gym's own tools,
+  the native vector env and :func:`fir_gym.training.make_sb3_vec_env` do).
 """
 
 from __future__ import annotations
@@ -64,7 +77,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators import StateSpaceModel
-from fir_gym.estimators._validation import as_covariance, as_vector
+from fir_gym.estimators._validation import as_covariance, as_vector, positive
 
 from ._inputs import real_array, reset_options
 from ._overlay import EstimateDrawing
@@ -105,6 +118,10 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
     action_names: ClassVar[tuple[str, ...]] = ()
     #: the FIR window (measurements) a wrapper uses when the user gives none
     default_horizon: ClassVar[int] = 10
+    #: the registered time limit (``gym.spec(id).max_episode_steps`` mirrors it)
+    default_max_episode_steps: ClassVar[int] = 1000
+    #: the worst per-step cost (the reward's floor is ``-cost_cap``; set by each plant)
+    cost_cap: float = math.inf
     #: beyond this magnitude a state component means the simulation failed
     state_limit: ClassVar[float] = STATE_LIMIT
 
@@ -118,6 +135,7 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         initial_state_cov: ArrayLike | None,
         measurement_cov: ArrayLike,
         render_mode: str | None,
+        max_episode_steps: int | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -125,6 +143,9 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
                 f"got {render_mode!r}"
             )
         self.render_mode = render_mode
+        self.max_episode_steps = (self.default_max_episode_steps if max_episode_steps is None
+                                  else positive("max_episode_steps", max_episode_steps,
+                                                    integer=True))
         self.params: dict[str, Any] = dict(params)
         overrides = dict(default_nominal or {})
         if nominal is not None:
@@ -246,7 +267,8 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         failure = extra.get("simulation_failure") or state_failure(x_next, self.state_limit)
         if failure is None:
             terminated = not bool(self._in_domain(x_next))
-            reward = float(self._reward(x, a, x_next))
+            reward = (float(self._reward(x, a, x_next)) if not terminated
+                      else float(self._terminal_reward(self.time_step)))
             obs = self._measure(x_next, extra, self.np_random)
             # a finite sum means every entry is finite (the exact test only when it is not)
             if not math.isfinite(reward + sum(obs.tolist())):
@@ -268,23 +290,14 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         """End the episode at the last valid state ``x``: the transition failed.
 
         The plant stays at ``x``, the observation repeats the last one and the reward
-        is that of staying at ``x`` (a terminal step like any other termination).
+        is the terminal penalty (a termination like any other: failing never pays).
         """
         self._restore(x)
-        reward = float(self._reward_of_staying(x, a))
+        reward = float(self._terminal_reward(self.time_step))
         info: dict[str, Any] = {"state": x.copy(), "action": a, "action_clipped": clipped}
         info.update((key, value) for key, value in extra.items() if _all_finite(value))
         info["simulation_failure"] = failure
         return self._last_obs.copy(), reward, True, False, info
-
-    def _reward_of_staying(self, x: FloatArray, a: FloatArray) -> Any:
-        """The reward of a failed step: staying at the last valid state ``x`` under ``a``
-        (one system or a batch). A plant whose reward is not finite there is broken."""
-        reward = self._reward(x, a, x)
-        if not np.all(np.isfinite(reward)):
-            raise RuntimeError(f"{type(self).__name__}'s reward is not finite at the valid "
-                               f"state(s) {x}")
-        return reward
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:
@@ -305,6 +318,12 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         return canvas.image
 
     # ------------------------------------------------------------------ helpers
+    def _terminal_reward(self, steps_taken: Any) -> Any:
+        """The reward of a terminating step, after ``steps_taken`` steps (int or array):
+        ``-cost_cap`` for it and for each step left to :attr:`max_episode_steps`."""
+        left = np.maximum(self.max_episode_steps - np.asarray(steps_taken), 0)
+        return -self.cost_cap * (1.0 + left)
+
     def _check_state(self, name: str, value: Any) -> FloatArray:
         """``value`` as a state of this plant: ``n_x`` real numbers, valid, in the domain."""
         names = self.state_names
@@ -342,6 +361,14 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
             raise ValueError(f"action must be finite; got {a}")
         clipped = a.clip(-1.0, 1.0)
         return clipped, bool((clipped != a).any())
+
+
+def saturated_cost(cost: Any, cap: float) -> Any:
+    """``min(cost, cap)`` elementwise, with a NaN cost counted as ``cap`` (float or array):
+    the per-step cost of every plant's reward, bounded by its worst rate."""
+    if isinstance(cost, float):
+        return cost if cost < cap else cap
+    return np.where(cost < cap, cost, cap)
 
 
 def state_failure(x: FloatArray, limit: float) -> str | None:

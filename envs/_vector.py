@@ -9,11 +9,25 @@ step after a sub-environment terminates or is truncated resets it, ignores its
 action, and returns the first measurement of the new episode with reward 0 and
 ``terminated = truncated = False``.
 
+``autoreset_mode=AutoresetMode.SAME_STEP`` resets a finished sub-environment in the
+step that finished it, as Gymnasium's ``SyncVectorEnv`` does in that mode: the
+observation is the new episode's first one, ``info["final_obs"]`` and
+``info["final_info"]`` (masked by ``info["_final_obs"]``) hold the last observation
+and step info of the finished episode, and ``info`` itself holds the reset info for
+those sub-environments (what stable-baselines3's ``VecEnv`` needs).
+
 ``info`` holds ``state`` (the true states, ``(B, n_x)``), ``action`` (the applied
-actions after clipping) and each plant's per-step extras, each with Gymnasium's
-``_key`` mask. The plant's noise is drawn from the vector env's own generator, so a
-seed gives bit-identical rollouts (but not the same numbers as ``num_envs``
-separate envs, whose generators differ).
+actions after clipping), ``action_clipped`` and each plant's per-step extras, each
+with Gymnasium's ``_key`` mask. Rewards and terminal penalties are the plant's
+(:mod:`fir_gym.envs._base`: a terminating sub-environment is paid ``-cost_cap`` for
+each step left to ``max_episode_steps``, which the vector env gives its plant). By
+default (``generators="shared"``) the plant's noise is drawn from the vector env's own
+generator, so a seed gives bit-identical rollouts (but not the same numbers as
+``num_envs`` separate envs, whose generators differ). With ``generators="per_env"``
+every sub-environment draws from its own generator, seeded ``seed + i`` on
+``reset(seed=seed)`` as Gymnasium's and stable-baselines3's vector envs seed their
+sub-envs, in the order a single env draws: the numbers are then those of
+``num_envs`` separate envs (one generator call per sub-env and draw, so slower).
 
 With ``render_mode="rgb_array"`` (``gym.make_vec(id, n, vectorization_mode=
 "vector_entry_point", render_mode="rgb_array")``), ``render()`` returns one frame per
@@ -24,7 +38,7 @@ The single plant's rules hold per sub-environment (:mod:`fir_gym.envs._base`):
 actions must be real numbers (:mod:`fir_gym.envs._inputs`); ``reset(options={"state":
 x0})`` takes one valid state ``(n_x,)`` for every sub-env or one per sub-env
 ``(B, n_x)``; a sub-env whose simulation fails terminates at its last valid state,
-with its last observation and the reward of staying there, and
+with its last observation and the terminal penalty, and
 ``info["simulation_failure"]`` (an object array, ``None`` elsewhere, with its
 ``_simulation_failure`` mask) says why; non-finite per-step extras of that sub-env
 are masked out (0, with their ``_key`` mask off).
@@ -37,14 +51,18 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.utils.seeding import np_random
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
+
+from fir_gym.estimators._validation import one_of
 
 from ._base import RESET_OPTIONS, PlantEnv, state_failure, valid_states
 from ._inputs import real_array, reset_options
 
 FloatArray = NDArray[np.float64]
+GENERATORS = ("shared", "per_env")
 
 
 class PlantVectorEnv(VectorEnv):
@@ -59,6 +77,8 @@ class PlantVectorEnv(VectorEnv):
         num_envs: int = 1,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        generators: str = "shared",
         **plant_kwargs: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
@@ -70,13 +90,28 @@ class PlantVectorEnv(VectorEnv):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array' for a native vector env; "
                              f"got {render_mode!r}")
+        modes = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
+        try:
+            mode: AutoresetMode | None = AutoresetMode(autoreset_mode)
+        except ValueError:
+            mode = None
+        if mode not in modes:
+            raise ValueError(f"autoreset_mode must be one of {[m.value for m in modes]}; got "
+                             f"{autoreset_mode!r}")
+        one_of("generators", generators, GENERATORS)
+        if max_episode_steps is not None:
+            plant_kwargs["max_episode_steps"] = max_episode_steps   # the plant's penalty horizon
         self.plant = plant_class(render_mode=render_mode, **plant_kwargs)
+        self.autoreset_mode = mode
+        self.generators = generators
+        self._generators: list[np.random.Generator] | None = None
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
         # the plant's frame rate (instance metadata, as Gymnasium's wrappers set theirs)
         self.metadata = {**type(self).metadata,
-                         "render_fps": self.plant.metadata.get("render_fps", 30)}
+                         "render_fps": self.plant.metadata.get("render_fps", 30),
+                         "autoreset_mode": mode}
         self._frame_views: tuple[Any, ...] = ()
         self.single_action_space = self.plant.action_space
         self.single_observation_space = self.plant.observation_space
@@ -94,39 +129,51 @@ class PlantVectorEnv(VectorEnv):
         """The plant's model (the filter's belief), shared by every sub-environment."""
         return self.plant.model
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[FloatArray, dict[str, Any]]:
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None) -> tuple[FloatArray, dict[str, Any]]:
         given = reset_options(options, RESET_OPTIONS)
         states = self._check_states(given["state"]) if "state" in given else None
-        super().reset(seed=seed)
-        self.states = self.plant._sample_initial_state(self.np_random, self.num_envs) \
+        if self.generators == "per_env":
+            self._seed_generators(seed)
+        else:
+            if isinstance(seed, (list, tuple)):
+                raise ValueError("a list of seeds needs generators='per_env' (one generator "
+                                 "per sub-env); give one int seed")
+            super().reset(seed=seed)
+        everyone = self._everyone
+        self.states = self.plant._sample_initial_state(self._rng(everyone), self.num_envs) \
             if states is None else states
         self.steps[:] = 0
         self.prev_done[:] = False
-        obs = self.plant._measure(self.states, None, self.np_random)
+        obs = self.plant._measure(self.states, None, self._rng(everyone))
         self._last_obs = obs.copy()
         return obs, self._info({"state": self.states.copy()})
 
     def step(self, actions: ArrayLike
              ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, dict[str, Any]]:
-        A = self._check_actions(actions)
-        x = self.states
-        plant = self.plant
-        x_next, extra = plant._transition(x, A, self.steps, self.np_random)
+        A, clipped = self._check_actions(actions)
+        x, plant = self.states, self.plant
+        done = self.prev_done                       # next-step mode: these reset now
+        any_done = bool(done.any())
+        live = ~done if any_done else self._everyone
+        x_next, extra = plant._transition(x, A, self.steps, self._rng(live))
         limit = plant.state_limit
         # one reduction each way in the common case (NaN fails the comparisons)
         all_valid = bool(x_next.max() <= limit and x_next.min() >= -limit)
         valid = self._everyone if all_valid else valid_states(x_next, limit)
         # a failed sub-env stays at its state: never measure or reward an invalid one
         safe = x_next if all_valid else np.where(valid[:, None], x_next, x)
-        reward = np.broadcast_to(np.asarray(plant._reward(x, A, safe), dtype=np.float64),
-                                 (self.num_envs,)).copy()
+        reward = np.asarray(plant._reward(x, A, safe), dtype=np.float64)
+        if reward.shape != (self.num_envs,):
+            reward = np.broadcast_to(reward, (self.num_envs,)).copy()
         terminated = ~np.asarray(plant._in_domain(x_next), dtype=bool)
-        self.steps += 1
-        truncated = (self.steps >= self.max_episode_steps if self.max_episode_steps
+        steps = self.steps
+        steps += 1
+        if terminated.any():                        # paid for the steps left (honest tasks)
+            reward[terminated] = plant._terminal_reward(steps[terminated])
+        truncated = (steps >= self.max_episode_steps if self.max_episode_steps
                      else np.zeros(self.num_envs, dtype=bool))
-        obs = plant._measure(safe, extra, self.np_random)
-        done = self.prev_done
+        obs = plant._measure(safe, extra, self._rng(live if all_valid else live & valid))
         failure = None if all_valid and math.isfinite(reward.sum() + obs.sum()) else \
             self._failures(x_next, valid, reward, obs, done)
         masks: dict[str, np.ndarray] = {}
@@ -135,7 +182,7 @@ class PlantVectorEnv(VectorEnv):
             x_next = np.array(x_next)
             x_next[failed] = x[failed]
             obs[failed] = self._last_obs[failed]
-            reward[failed] = plant._reward_of_staying(x[failed], A[failed])
+            reward[failed] = plant._terminal_reward(steps[failed])
             terminated |= failed
             extra = dict(extra)
             for key, value in extra.items():
@@ -144,24 +191,66 @@ class PlantVectorEnv(VectorEnv):
                     masks[key] = np.isfinite(arr)
                     arr[~masks[key]] = 0.0
                 extra[key] = arr
-        if np.any(done):                                        # next-step autoreset
-            fresh = plant._sample_initial_state(self.np_random, int(done.sum()))
-            x_next[done] = fresh
-            obs[done] = plant._measure(fresh, None, self.np_random)
-            self.steps[done] = 0
+        if any_done:                                            # next-step autoreset
+            self._restart(done, x_next, obs)
             reward[done] = 0.0
             terminated[done] = False
             truncated[done] = False
-        self.states = x_next
-        self.prev_done = terminated | truncated
-        self._last_obs = obs.copy()
-        info = {"state": x_next.copy(), "action": A}
-        info.update({key: np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
-                     for key, v in extra.items()})
+        info = {"state": x_next.copy(), "action": A, "action_clipped": clipped}
+        for key, v in extra.items():
+            info[key] = np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
         if failure is not None:
             info["simulation_failure"] = failure
             masks["simulation_failure"] = failure != None     # noqa: E711
-        return obs, reward, terminated, truncated, self._info(info, masks)
+        info = self._info(info, masks)
+        ended = terminated | truncated
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            if ended.any():                                     # same-step autoreset
+                final_obs = obs.copy()
+                final_info = {key: value.copy() if isinstance(value, np.ndarray) else value
+                              for key, value in info.items()}
+                self._restart(ended, x_next, obs)
+                info["state"] = x_next.copy()        # the reset info of the restarted ones
+                info["final_obs"], info["_final_obs"] = final_obs, ended
+                info["final_info"], info["_final_info"] = final_info, ended
+            self.prev_done = np.zeros(self.num_envs, dtype=bool)
+        else:
+            self.prev_done = ended
+        self.states = x_next
+        self._last_obs = obs.copy()
+        return obs, reward, terminated, truncated, info
+
+    def _restart(self, rows: np.ndarray, x_next: FloatArray, obs: FloatArray) -> None:
+        """Start a new episode in ``rows``: a fresh initial state and its measurement."""
+        rng = self._rng(rows)
+        fresh = self.plant._sample_initial_state(rng, int(rows.sum()))
+        x_next[rows] = fresh
+        obs[rows] = self.plant._measure(fresh, None, rng)
+        self.steps[rows] = 0
+
+    # ------------------------------------------------------------------ generators
+    def _seed_generators(self, seed: int | list[int | None] | None) -> None:
+        n = self.num_envs
+        if isinstance(seed, (list, tuple)):
+            if len(seed) != n:
+                raise ValueError(f"seed must be an int, None or a list of {n} seeds; got "
+                                 f"{len(seed)} seeds")
+            seeds: list[int | None] = list(seed)
+        elif seed is None:
+            seeds = [None] * n
+        else:
+            seeds = [int(seed) + i for i in range(n)]
+        if self._generators is None:
+            self._generators = [np_random(s)[0] for s in seeds]
+        else:
+            self._generators = [g if s is None else np_random(s)[0]
+                                for g, s in zip(self._generators, seeds, strict=True)]
+
+    def _rng(self, rows: np.ndarray) -> Any:
+        """The generator the plant's hooks draw from for the systems ``rows`` (a mask)."""
+        if self._generators is None:
+            return self.np_random
+        return RowGenerators(self._generators, rows)
 
     def _failures(self, x_next: FloatArray, valid: np.ndarray, reward: FloatArray,
                   obs: FloatArray, done: np.ndarray) -> np.ndarray | None:
@@ -206,7 +295,7 @@ class PlantVectorEnv(VectorEnv):
         :class:`fir_gym.envs._overlay.FrameView`)."""
         return self._frame_views
 
-    def _check_actions(self, actions: ArrayLike) -> FloatArray:
+    def _check_actions(self, actions: ArrayLike) -> tuple[FloatArray, np.ndarray]:
         shape = self.action_space.shape
         A = actions if type(actions) is np.ndarray and actions.dtype.kind == "f" else \
             real_array("actions", actions, lambda: f"real numbers in [-1, 1] of shape {shape}")
@@ -214,7 +303,8 @@ class PlantVectorEnv(VectorEnv):
             raise ValueError(f"actions must have shape {shape}; got shape {A.shape}")
         if not np.all(np.isfinite(A)):
             raise ValueError("actions must be finite")
-        return np.clip(A, -1.0, 1.0).astype(np.float64, copy=False)
+        clipped = np.clip(A, -1.0, 1.0).astype(np.float64, copy=False)
+        return clipped, (clipped != A).any(axis=1)
 
     def _check_states(self, value: Any) -> FloatArray:
         """``reset``'s ``options['state']``: one state for all sub-envs, or one each."""
@@ -241,4 +331,35 @@ class PlantVectorEnv(VectorEnv):
         for key, value in info.items():
             out[key] = value
             out["_" + key] = masks.get(key, everyone)
+        return out
+
+
+class RowGenerators:
+    """One generator per system, behind the ``standard_normal`` the plant hooks draw with.
+
+    A hook draws a batch as ``rng.standard_normal((B,) + shape)`` (batch axis first) where
+    one system draws ``standard_normal(shape)``. This stand-in draws row ``i`` from the
+    ``i``-th selected generator with ``shape``, so each system's numbers are those of a
+    single env with that generator. ``rows`` selects the systems drawing: a draw of
+    ``B = len(rows)`` rows gives zeros (without consuming) to the unselected ones (a
+    system restarting in this step); a draw of ``rows.sum()`` rows serves only the
+    selected ones (their fresh initial states).
+    """
+
+    def __init__(self, generators: list[np.random.Generator], rows: np.ndarray) -> None:
+        self.generators, self.rows = generators, rows
+
+    def standard_normal(self, size: Any = None) -> FloatArray:
+        size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+        n, shape = size[0], size[1:]
+        picked = [g for g, r in zip(self.generators, self.rows.tolist(), strict=True) if r]
+        if n == len(picked):
+            return np.array([g.standard_normal(shape) for g in picked]).reshape(size)
+        if n != len(self.generators):
+            raise ValueError(f"a batched draw must have {len(self.generators)} or "
+                             f"{len(picked)} rows first; got size {size}")
+        out = np.zeros(size)
+        for i, (g, r) in enumerate(zip(self.generators, self.rows.tolist(), strict=True)):
+            if r:
+                out[i] = g.standard_normal(shape)
         return out

@@ -14,7 +14,7 @@ from fir_gym.estimators._validation import FloatArray, positive
 from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
-from ._base import PlantEnv, psd_sqrt
+from ._base import PlantEnv, psd_sqrt, saturated_cost
 
 PAPER_A21 = -0.36
 PAPER_A22 = -0.06
@@ -93,9 +93,11 @@ class CarrierMotionEnv(PlantEnv):
 
     ## Rewards
 
-    ``-((x1[k+1] - c_k) / σ1)²`` with ``σ1`` the stationary standard deviation of
-    ``x1`` (≈ 0.32 with the paper's values; 1 for a calm sea, ``q = 0``): 0 is
-    perfect compensation, about -1 is doing nothing.
+    ``-min(((x1[k+1] - c_k) / σ1)², cost_cap)`` with ``σ1`` the stationary standard
+    deviation of ``x1`` (≈ 0.32 with the paper's values; 1 for a calm sea, ``q = 0``):
+    0 is perfect compensation, about -1 is doing nothing; ``cost_cap = 100`` (a
+    residual of 10 σ1, never reached from the stationary distribution) keeps every
+    reward finite, e.g. after ``reset(options={"state": ...})`` with a huge state.
 
     ## Starting State
 
@@ -105,16 +107,18 @@ class CarrierMotionEnv(PlantEnv):
 
     ## Episode End
 
-    No termination (the plant is stable and linear); truncation at 1000 steps
-    (100 s) by the registered ``TimeLimit``.
+    No termination (the plant is stable and linear) unless the state stops being
+    finite, which is paid ``-cost_cap * (1 + steps left to max_episode_steps)``;
+    truncation at ``max_episode_steps`` = 1000 steps (100 s) by the registered
+    ``TimeLimit``.
 
     ## Arguments
 
     ``gym.make("fir_gym/CarrierMotion-v0", sample_period=0.1, q=0.035, v=1.0,
     delta22=0.0, delta_c=0.0, a21=-0.36, a22=-0.06, noise_input=(0.6, -0.036),
     c_max=1.0, nominal=None, initial_state=(0, 0), initial_state_cov="stationary",
-    render_mode=None)``. ``nominal`` may change any of ``q, v, delta22, delta_c,
-    a21, a22, noise_input, sample_period`` for the model.
+    max_episode_steps=1000, render_mode=None)``. ``nominal`` may change any of
+    ``q, v, delta22, delta_c, a21, a22, noise_input, sample_period`` for the model.
 
     ## Version History
 
@@ -130,6 +134,8 @@ class CarrierMotionEnv(PlantEnv):
     truth_label: ClassVar[str] = "truth (deck)"
     truth_color: ClassVar[tuple[int, int, int]] = _draw.GREY
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
+    default_max_episode_steps: ClassVar[int] = 1000
+    cost_cap: float = 100.0
 
     def __init__(
         self,
@@ -146,6 +152,7 @@ class CarrierMotionEnv(PlantEnv):
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike = (0.0, 0.0),
         initial_state_cov: ArrayLike | str | None = "stationary",
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
     ) -> None:
         noise_input_ = np.asarray(noise_input, dtype=np.float64)
@@ -176,7 +183,8 @@ class CarrierMotionEnv(PlantEnv):
         super().__init__(params=params, nominal=nominal,
                          default_nominal={"delta22": 0.0, "delta_c": 0.0},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         measurement_cov=R_d, render_mode=render_mode)
+                         measurement_cov=R_d, render_mode=render_mode,
+                         max_episode_steps=max_episode_steps)
         self._A_d, self._C = A_d, C
         self._process_sqrt = psd_sqrt(Q_d)
         # reward normaliser; a calm sea (q = 0) has no stationary spread, use 1
@@ -191,7 +199,11 @@ class CarrierMotionEnv(PlantEnv):
         return x @ self._C.T
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
-        return -((x_next[..., 0] - a[..., 0] * self.c_max) / self._sigma1) ** 2
+        if x_next.ndim == 1:   # in Python floats: a huge finite state overflows to inf quietly
+            d = (x_next.item(0) - a.item(0) * self.c_max) / self._sigma1
+        else:
+            d = (x_next[:, 0] - a[:, 0] * self.c_max) / self._sigma1
+        return -saturated_cost(d * d, self.cost_cap)
 
     @property
     def continuous_model(self) -> ContinuousModel:

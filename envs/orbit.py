@@ -12,7 +12,7 @@ from fir_gym.estimators import StateSpaceModel, compiled
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
-from ._base import FirstStateMeasured, PlantEnv, psd_sqrt
+from ._base import FirstStateMeasured, PlantEnv, psd_sqrt, saturated_cost
 from ._interval_kernels import orbit_interval
 
 TRUE_MU = 19.92244165
@@ -139,7 +139,11 @@ class OrbitEnv(PlantEnv):
 
     ## Rewards
 
-    Hold the reference radius: ``-(r[k+1] - r_ref)² - 0.01 action²``.
+    Hold the reference radius: the cost ``(r[k+1] - r_ref)² + 0.01 action²``,
+    saturated at ``cost_cap = (r_ref - r_min)² + 0.01`` (49.01 by default: the cost of
+    lying on the planet's surface at full thrust), so the reward
+    ``-min(cost, cost_cap)`` lies in ``[-cost_cap, 0]``. Hovering at ``r_ref`` needs
+    the thrust ``μ / r_ref²`` (action ≈ 0.311), which costs 0.001 per step.
 
     ## Starting State
 
@@ -149,14 +153,18 @@ class OrbitEnv(PlantEnv):
     ## Episode End
 
     Termination when ``r <= r_min`` (the body reaches the planet, 1.0) or
-    ``r >= r_max`` (100.0). Truncation at 1000 steps (10 time units) by the
+    ``r >= r_max`` (100.0); the terminating step is paid
+    ``-cost_cap * (1 + steps left to max_episode_steps)``, so crashing early never
+    pays (a constant full reverse thrust reaches the planet in about 500 steps).
+    Truncation at ``max_episode_steps`` = 1000 steps (10 time units) by the
     registered ``TimeLimit``.
 
     ## Arguments
 
     ``gym.make("fir_gym/Orbit-v0", mu=19.92244165, R=1e-3, Q=None, euler_dt=1e-4,
     substeps=100, thrust_max=1.0, r_ref=8.0, nominal={"mu": 19.91},
-    initial_state=(7.99, 1.99), initial_state_cov=None, render_mode=None)``.
+    initial_state=(7.99, 1.99), initial_state_cov=None, max_episode_steps=1000,
+    render_mode=None)``.
     ``nominal`` lists parameters the model believes differently from the truth
     (keys: ``mu, R, Q, euler_dt, substeps, thrust_max``).
 
@@ -169,6 +177,7 @@ class OrbitEnv(PlantEnv):
     measurement_names: ClassVar[tuple[str, ...]] = ("r_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("thrust",)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
+    default_max_episode_steps: ClassVar[int] = 1000
 
     def __init__(
         self,
@@ -185,6 +194,7 @@ class OrbitEnv(PlantEnv):
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike = (7.99, 1.99),
         initial_state_cov: ArrayLike | None = None,
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
     ) -> None:
         params = {
@@ -199,9 +209,11 @@ class OrbitEnv(PlantEnv):
         self.r_min, self.r_max = positive("r_min", r_min), positive("r_max", r_max)
         if not self.r_min < self.r_ref < self.r_max:
             raise ValueError(f"need r_min < r_ref < r_max; got {r_min}, {r_ref}, {r_max}")
+        self.cost_cap = (self.r_ref - self.r_min) ** 2 + 0.01
         super().__init__(params=params, nominal=nominal, default_nominal={"mu": NOMINAL_MU},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         measurement_cov=params["R"], render_mode=render_mode)
+                         measurement_cov=params["R"], render_mode=render_mode,
+                         max_episode_steps=max_episode_steps)
         self._dynamics = OrbitDynamics(self.params["mu"], self.params["euler_dt"],
                                        self.params["substeps"], self.params["thrust_max"])
         self._process_sqrt = psd_sqrt(self.params["Q"])
@@ -218,11 +230,12 @@ class OrbitEnv(PlantEnv):
         return OrbitDynamics.h(x)
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
-        return -(x_next[..., 0] - self.r_ref) ** 2 - 0.01 * a[..., 0] ** 2
+        e, u = x_next[..., 0] - self.r_ref, a[..., 0]
+        return -saturated_cost(e * e + 0.01 * u * u, self.cost_cap)
 
     def _in_domain(self, x: FloatArray) -> Any:
         r = x[..., 0]
-        return np.all(np.isfinite(x), axis=-1) & (self.r_min < r) & (r < self.r_max)
+        return np.isfinite(x).all(axis=-1) & (self.r_min < r) & (r < self.r_max)
 
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         dyn = OrbitDynamics(positive("nominal mu", params["mu"]), params["euler_dt"],

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
-from ._base import PlantEnv, psd_sqrt
+from ._base import PlantEnv, psd_sqrt, saturated_cost
 from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
 from ._overlay import CameraView
 from .pendulum_slider_dynamics import (
@@ -169,8 +169,12 @@ class PendulumSliderEnv(PlantEnv):
 
     Damp the swing and hold the slider at its rest position ``x_rest`` (10.8 mm
     with the paper's friction, l0 otherwise) with little force, per second of
-    simulated time: ``-(θ² + 0.1 θ̇² + 100 (x - x_rest)² + 0.01 action²) · Δt / 0.01``
-    (``Δt`` = 1 ms × ``frame_skip``).
+    simulated time: the cost ``c = θ² + 0.1 θ̇² + 100 (x - x_rest)² + 0.01 action²``,
+    saturated at 20 (the slider at the end of the rail with the pendulum upside down
+    costs about 19), times ``Δt / 0.01`` (``Δt`` = 1 ms × ``frame_skip``): the reward
+    is ``-min(c, 20) · Δt / 0.01``, in ``[-cost_cap, 0]`` with
+    ``cost_cap = 2 · frame_skip`` (θ is not wrapped: a pendulum that spins over the
+    top pays the cap).
 
     ## Starting State
 
@@ -181,13 +185,17 @@ class PendulumSliderEnv(PlantEnv):
     ## Episode End
 
     Termination when the slider leaves the rail (``|x - l0| > 0.3`` m) or the state
-    is not finite; truncation at 5000 steps (5 s at the default 1 kHz).
+    is not finite; the terminating step is paid
+    ``-cost_cap * (1 + steps left to max_episode_steps)``, so leaving the rail early
+    never pays. Truncation at ``max_episode_steps`` = 5000 steps (5 s at the default
+    1 kHz) by the registered ``TimeLimit``.
 
     ## Arguments
 
     ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", dynamics="physical", frame_skip=1,
     force_max=10.0, R=diag(PAPER_R_STD²), Q=None, nominal=None, initial_state=None,
-    initial_state_cov=None, render_mode=None, width=480, height=360, **params)``,
+    initial_state_cov=None, max_episode_steps=5000, render_mode=None, width=480,
+    height=360, **params)``,
     ``params`` among ``m1, m2, l, I_c, k, l0, M0, mu, g``. ``frame_skip`` MuJoCo
     steps of 1 ms make one env step. ``Q`` is the true process noise added to the
     state after each env step (none by default: MuJoCo is deterministic); the
@@ -212,6 +220,9 @@ class PendulumSliderEnv(PlantEnv):
     #: MuJoCo's ``mjMAXVAL``: beyond it MuJoCo resets its simulation at the next step
     state_limit: ClassVar[float] = 1e10
     metadata = {"render_modes": ["rgb_array"], "render_fps": 100}  # noqa: RUF012
+    default_max_episode_steps: ClassVar[int] = 5000
+    #: the cap of the bracketed cost (before the Δt / 0.01 scaling)
+    BRACKET_CAP: ClassVar[float] = 20.0
 
     def __init__(
         self,
@@ -225,6 +236,7 @@ class PendulumSliderEnv(PlantEnv):
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike | None = None,
         initial_state_cov: ArrayLike | None = "swing",
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
         width: int = 480,
         height: int = 360,
@@ -266,7 +278,10 @@ class PendulumSliderEnv(PlantEnv):
         super().__init__(params=params, nominal=nominal,
                          default_nominal={"Q": np.full(4, 1e-6)},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         measurement_cov=params["R"], render_mode=render_mode)
+                         measurement_cov=params["R"], render_mode=render_mode,
+                         max_episode_steps=max_episode_steps)
+        self._reward_scale = self.params["frame_skip"] * 0.1
+        self.cost_cap = self.BRACKET_CAP * self._reward_scale
         self.width, self.height = positive("width", width, integer=True), \
             positive("height", height, integer=True)
         self._process_sqrt = psd_sqrt(self.params["Q"])
@@ -400,12 +415,12 @@ class PendulumSliderEnv(PlantEnv):
         return x.copy()
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        # Python floats: the same IEEE operations as on numpy scalars (``**`` is libm's pow
-        # for both), without numpy's per-scalar overhead
+        # Python floats, without numpy's per-scalar overhead; products, not ``**``, so that
+        # a huge finite state overflows to inf (then the cap), never raises
         p, _, th, w = x_next.tolist()
-        cost = (th ** 2 + 0.1 * w ** 2 + 100.0 * (p - self.x_rest) ** 2
-                + 0.01 * a.item(0) ** 2)
-        return -cost * self.params["frame_skip"] * 0.1
+        e, u = p - self.x_rest, a.item(0)
+        cost = th * th + 0.1 * w * w + 100.0 * e * e + 0.01 * u * u
+        return -saturated_cost(cost, self.BRACKET_CAP) * self._reward_scale
 
     def _in_domain(self, x: FloatArray) -> bool:
         if x.ndim != 1:

@@ -12,7 +12,7 @@ from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
 from . import _draw
-from ._base import FirstStateMeasured, PlantEnv
+from ._base import FirstStateMeasured, PlantEnv, saturated_cost
 
 UNCERTAINTY_READINGS = ("state", "rate")
 PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
@@ -118,8 +118,17 @@ class UncertainOscillatorEnv(PlantEnv):
 
     ## Rewards
 
-    Regulate x1 to ``setpoint`` (default 1.0, away from the natural rest 0.48):
-    ``-(x1[k+1] - setpoint)² - 1e-3 action²``.
+    Regulate x1 to ``setpoint`` (default 1.0, away from the natural rest 0.48): the
+    cost ``(x1[k+1] - setpoint)² + 1e-3 action²``, saturated at ``cost_cap = 2.25``
+    (an x1 error of 1.5, half again the distance from the start to the setpoint), so
+    the reward ``-min(cost, cost_cap)`` lies in ``[-2.25, 0]``. Holding the setpoint
+    needs ``u = c·setpoint - b`` (action 0.52 with the defaults). The cap is low on
+    purpose: under the printed reading the uncertainty window multiplies the state by
+    1.15 per step (1.15⁵¹ ≈ 1.3e3), faster than the bounded input can counter near
+    the setpoint, and no controller brings the state back within the episode; a
+    higher cap would make the return measure how far the blow-up went (smallest for a
+    state parked near the origin, the one point δ cannot move) rather than the
+    regulation the task asks for.
 
     ## Starting State
 
@@ -128,8 +137,10 @@ class UncertainOscillatorEnv(PlantEnv):
 
     ## Episode End
 
-    Termination when any ``|x_i| > state_bound`` (1e4). Truncation at 500 steps
-    by the registered ``TimeLimit`` (the paper's experiment runs to k = 500).
+    Termination when any ``|x_i| > state_bound`` (1e4); the terminating step is paid
+    ``-cost_cap * (1 + steps left to max_episode_steps)``, so leaving early never
+    pays. Truncation at ``max_episode_steps`` = 500 steps by the registered
+    ``TimeLimit`` (the paper's experiment runs to k = 500).
 
     ## Arguments
 
@@ -137,7 +148,7 @@ class UncertainOscillatorEnv(PlantEnv):
     delta_schedule=((350, 400, 0.15),), Q=0.4, R=0.1, dt=0.01, stiffness=25.0,
     damping_gain=10.0, drive=12.0, u_max=25.0, setpoint=1.0, state_bound=1e4,
     nominal=None, initial_state=(0, 0, 0.5), initial_state_cov=None,
-    render_mode=None)``. ``delta_schedule`` is a sequence of
+    max_episode_steps=500, render_mode=None)``. ``delta_schedule`` is a sequence of
     ``(k_first, k_last, δ)`` (inclusive; ``k`` indexes the transition from
     ``x[k]`` to ``x[k+1]``); overlapping windows add. The model always uses
     δ = 0; ``nominal`` may change ``Q, R, dt, stiffness, damping_gain, drive,
@@ -152,6 +163,8 @@ class UncertainOscillatorEnv(PlantEnv):
     measurement_names: ClassVar[tuple[str, ...]] = ("x1_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
+    default_max_episode_steps: ClassVar[int] = 500
+    cost_cap: float = 2.25
 
     def __init__(
         self,
@@ -170,6 +183,7 @@ class UncertainOscillatorEnv(PlantEnv):
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike = (0.0, 0.0, 0.5),
         initial_state_cov: ArrayLike | None = None,
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
     ) -> None:
         one_of("uncertainty", uncertainty, UNCERTAINTY_READINGS)
@@ -188,7 +202,8 @@ class UncertainOscillatorEnv(PlantEnv):
         self.state_bound = positive("state_bound", state_bound)
         super().__init__(params=params, nominal=nominal, default_nominal=None,
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         measurement_cov=params["R"], render_mode=render_mode)
+                         measurement_cov=params["R"], render_mode=render_mode,
+                         max_episode_steps=max_episode_steps)
         self._dynamics = self._make_dynamics(self.params, uncertainty)
         self._noise_std = float(np.sqrt(self.params["Q"][0, 0]))
 
@@ -216,7 +231,8 @@ class UncertainOscillatorEnv(PlantEnv):
         return OscillatorDynamics.h(x)
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
-        return -(x_next[..., 0] - self.setpoint) ** 2 - 1e-3 * a[..., 0] ** 2
+        e, u = x_next[..., 0] - self.setpoint, a[..., 0]
+        return -saturated_cost(e * e + 1e-3 * u * u, self.cost_cap)
 
     def _in_domain(self, x: FloatArray) -> Any:
         return np.all(np.isfinite(x) & (np.abs(x) <= self.state_bound), axis=-1)

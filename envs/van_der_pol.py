@@ -14,7 +14,7 @@ from fir_gym.estimators._validation import FloatArray, positive
 from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
-from ._base import FirstStateMeasured, PlantEnv
+from ._base import FirstStateMeasured, PlantEnv, saturated_cost
 from ._interval_kernels import heun_interval
 
 NOISE_INPUT = np.array([1.0, 1.0])
@@ -205,6 +205,11 @@ class VanDerPolEnv(PlantEnv):
     |-----|-------------------------------------------|-----|-----|
     | 0   | force on the x2 equation, units of u_max  | -1  | 1   |
 
+    ``u = action * u_max`` with ``u_max = 20`` (not in the paper, which has no input):
+    enough authority per step (``u_max h = 2``) to dominate the process noise
+    (``√(Q h) ≈ 0.7`` per step in each state); with 5, a controller on the true state
+    saturated 85 % of the time and barely beat a constant input.
+
     ## Observation Space
 
     | Num | Observation                          | Min  | Max |
@@ -219,7 +224,10 @@ class VanDerPolEnv(PlantEnv):
 
     ## Rewards
 
-    Suppress the limit cycle: ``-(x1² + x2²)/4 - 0.01 action²`` at the end of the step.
+    Suppress the limit cycle: the cost ``(x1² + x2²)/4 + 0.01 action²`` at the end of
+    the step (about 1 on the noise-free limit cycle), saturated at
+    ``cost_cap = state_bound² / 2 + 0.01`` (200.01: the largest cost inside the
+    domain, so the reward ``-min(cost, cost_cap)`` is the plain cost there).
 
     ## Starting State
 
@@ -230,8 +238,10 @@ class VanDerPolEnv(PlantEnv):
 
     Termination when ``|x1|`` or ``|x2|`` exceeds ``state_bound`` (20), which
     also keeps the integrator accurate (the stiff eigenvalue near ``|x1| = b`` is
-    about ``-ε b²``; the constructor checks ``ε b² τ <= 0.5``). Truncation at 100
-    steps (10 s, the paper's t_f) by the registered ``TimeLimit``.
+    about ``-ε b²``; the constructor checks ``ε b² τ <= 0.5``); the terminating step
+    is paid ``-cost_cap * (1 + steps left to max_episode_steps)``, so leaving early
+    never pays. Truncation at ``max_episode_steps`` = 100 steps (10 s, the paper's
+    t_f) by the registered ``TimeLimit``.
 
     Because the noise enters ``x1`` directly, the stochastic oscillator does not
     stay near its limit cycle on long runs: away from it ``x2`` relaxes onto the
@@ -243,8 +253,9 @@ class VanDerPolEnv(PlantEnv):
     ## Arguments
 
     ``gym.make("fir_gym/VanDerPol-v0", epsilon=1.0, Q=5.0, R=5.0, h=0.1,
-    substeps=100, u_max=5.0, state_bound=20.0, nominal=None,
-    initial_state=(1, 1), initial_state_cov=None, render_mode=None)``.
+    substeps=100, u_max=20.0, state_bound=20.0, nominal=None,
+    initial_state=(1, 1), initial_state_cov=None, max_episode_steps=100,
+    render_mode=None)``.
     ``nominal`` may change ``epsilon, Q, R, h, substeps, u_max`` for the model.
 
     ## Version History
@@ -256,6 +267,7 @@ class VanDerPolEnv(PlantEnv):
     measurement_names: ClassVar[tuple[str, ...]] = ("x1_average_measured",)
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
+    default_max_episode_steps: ClassVar[int] = 100
 
     def __init__(
         self,
@@ -265,11 +277,12 @@ class VanDerPolEnv(PlantEnv):
         R: float = 5.0,
         h: float = 0.1,
         substeps: int = 100,
-        u_max: float = 5.0,
+        u_max: float = 20.0,
         state_bound: float = 20.0,
         nominal: Mapping[str, Any] | None = None,
         initial_state: ArrayLike = (1.0, 1.0),
         initial_state_cov: ArrayLike | None = None,
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
     ) -> None:
         Q_ = float(Q)
@@ -284,6 +297,7 @@ class VanDerPolEnv(PlantEnv):
             "u_max": positive("u_max", u_max),
         }
         self.state_bound = positive("state_bound", state_bound)
+        self.cost_cap = self.state_bound ** 2 / 2.0 + 0.01
         # Heun is stable for real eigenvalues z = λτ in [-2, 0]; near |x1| = b the
         # stiff eigenvalue is about -ε b², so keep ε b² τ <= 0.5 for accuracy.
         tau = params["h"] / params["substeps"]
@@ -295,7 +309,8 @@ class VanDerPolEnv(PlantEnv):
             )
         super().__init__(params=params, nominal=nominal, default_nominal=None,
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
-                         measurement_cov=params["R"] / params["h"], render_mode=render_mode)
+                         measurement_cov=params["R"] / params["h"], render_mode=render_mode,
+                         max_episode_steps=max_episode_steps)
         self._dynamics = self._make_dynamics(self.params)
         self._trail: list[tuple[float, float]] = []
 
@@ -333,8 +348,10 @@ class VanDerPolEnv(PlantEnv):
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
         dyn = self._dynamics
-        dW = np.sqrt(self.params["Q"] * dyn.tau) * rng.standard_normal(
-            (dyn.substeps,) + x.shape[:-1])
+        # drawn batch first, as every plant draws (one system's increments in a row), then
+        # laid out (substeps, ...) as the integrator reads them
+        dW = np.sqrt(self.params["Q"] * dyn.tau) * np.moveaxis(
+            rng.standard_normal(x.shape[:-1] + (dyn.substeps,)), -1, 0)
         x_next, x1_average, _ = dyn.integrate(x, a, dW)
         return x_next, {"x1_average": x1_average}
 
@@ -344,7 +361,9 @@ class VanDerPolEnv(PlantEnv):
         return np.asarray(extra["x1_average"], dtype=np.float64)[..., None]
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
-        return -0.25 * np.sum(x_next * x_next, axis=-1) - 0.01 * a[..., 0] ** 2
+        u = a[..., 0]
+        return -saturated_cost(0.25 * np.sum(x_next * x_next, axis=-1) + 0.01 * u * u,
+                               self.cost_cap)
 
     def _in_domain(self, x: FloatArray) -> Any:
         return np.all(np.isfinite(x) & (np.abs(x) <= self.state_bound), axis=-1)

@@ -8,9 +8,10 @@ Subcommands:
   sweeps beyond them; ``--out DIR`` writes ``DIR/REPORT.md`` and its figures;
 * ``fir-gym bench NAME`` — a speed benchmark (ratios against a reference timed in
   the same run);
-* ``fir-gym train`` / ``evaluate`` / ``compare-controllers`` — controllers trained
-  with stable-baselines3 on true states, raw measurements or estimates
-  (needs the ``rl`` extra);
+* ``fir-gym train`` / ``evaluate`` / ``compare-controllers`` /
+  ``benchmark-controllers`` — controllers trained with stable-baselines3 on true
+  states, raw or stacked measurements, a recurrent policy or estimates, beside LQG and
+  PID (needs the ``rl`` extra);
 * ``fir-gym watch`` — one episode recorded as a GIF or MP4, the estimate drawn over
   the plant (needs the ``video`` extra).
 """
@@ -125,25 +126,89 @@ def _json_dict(text: str) -> dict:
     return value
 
 
-def _cmd_train(args: argparse.Namespace) -> int:
-    from .training import RunConfig, evaluate, train
+def _int_at_least(minimum: int) -> Any:
+    """An argparse type: an integer >= ``minimum``, else a message naming the bound."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}; got {text!r}")
+        return value
+    return parse
 
-    config = RunConfig(env_id=args.env, observation_kind=args.estimator, algo=args.algo,
-                       steps=args.steps, seed=args.seed, n_envs=args.n_envs,
-                       observation=args.observation, estimator_kwargs=args.estimator_kwargs,
-                       env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs)
-    out = train(config, args.out, progress_bar=not args.no_progress)
-    result = evaluate(out, episodes=args.episodes)
+
+_positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
+
+
+def _fail(command: str, err: Exception) -> int:
+    """A bad kind, option or keyword argument: one line, no traceback."""
+    message = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
+    print(f"fir-gym {command}: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _runner(args: argparse.Namespace) -> object:
+    from .scenarios.runner import Runner
+
+    return Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
+                  progress=not args.no_progress)
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from .training import RunConfig, evaluate, kind_options, train
+
+    try:
+        options = kind_options(args.kind_kwargs, [args.estimator])[args.estimator]
+        config = RunConfig(env_id=args.env, observation_kind=args.estimator, algo=args.algo,
+                           steps=args.steps, seed=args.seed, n_envs=args.n_envs,
+                           observation=args.observation, kind_kwargs=options,
+                           env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs,
+                           eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
+                           tensorboard=args.tensorboard, hyperparams=args.hyperparams)
+        from .training.compare import validate
+
+        validate([config])
+    except (ValueError, TypeError, KeyError) as err:
+        return _fail("train", err)
+    out = train(config, args.out, progress_bar=not args.no_progress, resume=args.resume)
+    source = out if config.observation_kind not in ("lqg", "pid") else config
+    result = evaluate(source, episodes=args.episodes)
     print(f"{args.env} observing {args.estimator}: return {result.mean:.4g} ± {result.std:.3g} "
           f"over {args.episodes} episodes; saved in {out}")
     return 0
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .training import evaluate
+    from .training import RunConfig, evaluate, kind_options
 
-    result = evaluate(args.model, episodes=args.episodes, seed=args.seed)
-    print(f"return {result.mean:.4g} ± {result.std:.3g} over {args.episodes} episodes")
+    try:
+        if args.model:
+            if args.kind or args.env:
+                raise ValueError("give --model (a run folder) or --env with --kind, not both")
+            result = evaluate(args.model, episodes=args.episodes, seed=args.seed,
+                              best=args.best)
+        else:
+            if not (args.kind and args.env):
+                raise ValueError("give --model (a run folder) or --env and --kind "
+                                 "(lqg or pid: nothing to train)")
+            if args.kind not in ("lqg", "pid"):
+                raise ValueError(f"--kind {args.kind} is learned: train it, then evaluate "
+                                 "its folder with --model")
+            options = kind_options(args.kind_kwargs, [args.kind])[args.kind]
+            config = RunConfig(env_id=args.env, observation_kind=args.kind,
+                               kind_kwargs=options, env_kwargs=args.env_kwargs)
+            result = evaluate(config, episodes=args.episodes, seed=args.seed)
+    except (ValueError, TypeError, KeyError) as err:
+        return _fail("evaluate", err)
+    line = f"return {result.mean:.4g} ± {result.std:.3g} over {args.episodes} episodes"
+    if result.rmse is not None:
+        line += "; estimation RMSE " + ", ".join(f"{v:.3g}" for v in result.rmse)
+    if result.anees is not None:
+        line += f"; ANEES {result.anees:.3g}"
+    print(line)
     return 0
 
 
@@ -152,21 +217,91 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     kinds = [k.strip() for k in args.observations.split(",") if k.strip()]
     seeds = list(range(args.seeds))
-    summary = compare_controllers(args.env, kinds, seeds, args.out, steps=args.steps,
-                                  algo=args.algo, episodes=args.episodes,
-                                  estimator_kwargs=args.estimator_kwargs,
-                                  env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs,
-                                  n_envs=args.n_envs, progress_bar=not args.no_progress)
+    try:
+        with _runner(args) as runner:          # type: ignore[attr-defined]
+            summary = compare_controllers(
+                args.env, kinds, seeds, args.out, steps=args.steps, algo=args.algo,
+                episodes=args.episodes, kind_kwargs=args.kind_kwargs,
+                env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs, n_envs=args.n_envs,
+                observation=args.observation, eval_freq=args.eval_freq,
+                checkpoint_freq=args.checkpoint_freq, tensorboard=args.tensorboard,
+                resume=args.resume, runner=runner)
+    except (ValueError, TypeError, KeyError) as err:
+        return _fail("compare-controllers", err)
+    headers = ["observation", "mean return", "std over seeds", "IQM [95% CI]", "per seed",
+               "estimation RMSE", "ANEES"]
     rows = [[s["observation"], s["mean"], s["std"],
-             " ".join(f"{r:.4g}" for r in s["per_seed"])] for s in summary]
-    table = format_table(["observation", "mean return", "std over seeds", "per seed"], rows)
-    print(table)
-    Path(args.out, "comparison.md").write_text(
-        format_table(["observation", "mean return", "std over seeds", "per seed"], rows,
-                     markdown=True) + "\n")
-    plot = plot_learning_curves(args.out, kinds, seeds, Path(args.out, "learning_curves.png"))
+             f"{s['iqm']:.4g} [{s['iqm_low']:.4g}, {s['iqm_high']:.4g}]",
+             " ".join(f"{r:.4g}" for r in s["per_seed"]),
+             "—" if s["rmse"] is None else ", ".join(f"{v:.3g}" for v in s["rmse"]),
+             "—" if s["anees"] is None else f"{s['anees']:.3g}"] for s in summary]
+    print(format_table(headers, rows))
+    Path(args.out, "comparison.md").write_text(format_table(headers, rows, markdown=True) + "\n")
+    runs = {k: [Path(args.out, f"{k}-seed{s}") for s in seeds] for k in kinds}
+    plot = plot_learning_curves(runs, Path(args.out, "learning_curves.png"), title=args.env)
     print(f"wrote {Path(args.out, 'comparison.md')}" + (f" and {plot}" if plot else ""))
     return 0
+
+
+def _cmd_benchmark(args: argparse.Namespace) -> int:
+    from .training.benchmark import print_report, run_benchmark
+
+    plants = [p.strip() for p in args.plants.split(",")] if args.plants else None
+    try:
+        with _runner(args) as runner:          # type: ignore[attr-defined]
+            report = run_benchmark(args.out, quick=args.quick, runner=runner,
+                                   seeds=args.seeds, plants=plants)
+    except (ValueError, TypeError, KeyError) as err:
+        return _fail("benchmark-controllers", err)
+    print_report(report)
+    print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
+    return 0
+
+
+def _add_training_options(p: argparse.ArgumentParser) -> None:
+    """The options train and compare-controllers share."""
+    p.add_argument("--algo", default="ppo", choices=["ppo", "sac"],
+                   help="stable-baselines3 algorithm (the recurrent kind is RecurrentPPO; "
+                        "default ppo)")
+    p.add_argument("--steps", type=_positive_int, default=None,
+                   help="training timesteps (default: the plant's n_timesteps in the "
+                        "shipped hyperparameter YAML)")
+    p.add_argument("--n-envs", type=_positive_int, default=None,
+                   help="parallel sub-envs (default: the YAML's n_envs)")
+    p.add_argument("--observation", default="estimate",
+                   choices=["estimate", "estimate+covariance", "estimate+measurement"],
+                   help="what an estimator kind shows the controller (default estimate)")
+    p.add_argument("--kind-kwargs", "--estimator-kwargs", dest="kind_kwargs", type=_json_dict,
+                   default={}, help="JSON object: kind -> its options, e.g. "
+                                    "'{\"efir\": {\"horizon\": 50}}' (default none)")
+    p.add_argument("--env-kwargs", type=_json_dict, default={},
+                   help="JSON object of plant options, e.g. '{\"max_episode_steps\": 300}' "
+                        "(default none)")
+    p.add_argument("--algo-kwargs", type=_json_dict, default={},
+                   help="JSON object overriding the YAML's algorithm settings (default none)")
+    p.add_argument("--episodes", type=_positive_int, default=20,
+                   help="evaluation episodes per run (default 20)")
+    p.add_argument("--eval-freq", type=_non_negative_int, default=0,
+                   help="timesteps between evaluations that save the best model in "
+                        "RUN/best (default 0: none)")
+    p.add_argument("--checkpoint-freq", type=_non_negative_int, default=0,
+                   help="timesteps between checkpoints in RUN/checkpoints (default 0: none)")
+    p.add_argument("--tensorboard", default=None, metavar="DIR",
+                   help="write TensorBoard logs to DIR (needs tensorboard; default none)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from the latest checkpoint; skip finished runs")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _add_runner_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backend", default="serial", choices=["serial", "joblib", "dask"],
+                   help="where the (kind, seed) jobs run (default: this process)")
+    p.add_argument("--jobs", type=_positive_int, default=None,
+                   help="worker processes for joblib/dask (default: the CPUs)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of a Dask scheduler (with --backend dask; default: a local "
+                        "cluster)")
 
 
 def _cmd_watch(args: argparse.Namespace) -> int:
@@ -224,46 +359,59 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("train", help="train a controller with stable-baselines3")
     p.add_argument("--env", required=True, help="environment id, e.g. fir_gym/VanDerPol-v0")
-    p.add_argument("--estimator", default="true",
-                   help="what the controller sees: 'true', 'measurement' or an estimator name")
-    p.add_argument("--observation", default="estimate",
-                   help="estimate | estimate+covariance | estimate+measurement")
-    p.add_argument("--algo", default="ppo", choices=["ppo", "sac"])
-    p.add_argument("--steps", type=int, default=50_000)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-envs", type=int, default=8)
-    p.add_argument("--algo-kwargs", type=_json_dict, default={},
-                   help="JSON object of algorithm options (PPO defaults: see fir_gym.training)")
-    p.add_argument("--episodes", type=int, default=20, help="evaluation episodes")
-    p.add_argument("--estimator-kwargs", type=_json_dict, default={})
-    p.add_argument("--env-kwargs", type=_json_dict, default={})
-    p.add_argument("--out", required=True, help="folder for the model, statistics and logs")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--estimator", "--kind", dest="estimator", default="true",
+                   help="what the controller sees: true, measurement, measurement-stack, "
+                        "recurrent, an estimator name, or lqg/pid (nothing to train); "
+                        "default true")
+    p.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    p.add_argument("--hyperparams", default=None, metavar="YAML",
+                   help="an RL Zoo hyperparameter file instead of the shipped one")
+    _add_training_options(p)
     p.set_defaults(func=_cmd_train)
 
-    p = sub.add_parser("evaluate", help="evaluate a trained controller")
-    p.add_argument("--model", required=True, help="the folder `fir-gym train --out` wrote")
-    p.add_argument("--episodes", type=int, default=20)
-    p.add_argument("--seed", type=int, default=10_000)
+    p = sub.add_parser("evaluate", help="evaluate a trained controller, or LQG/PID")
+    p.add_argument("--model", default=None,
+                   help="the folder `fir-gym train --out` wrote (default none: give --env "
+                        "and --kind)")
+    p.add_argument("--env", default=None, help="environment id, with --kind lqg or pid")
+    p.add_argument("--kind", default=None, help="lqg or pid (classical: nothing to train)")
+    p.add_argument("--kind-kwargs", type=_json_dict, default={},
+                   help="JSON object: kind -> its options (default none)")
+    p.add_argument("--env-kwargs", type=_json_dict, default={},
+                   help="JSON object of plant options (default none)")
+    p.add_argument("--episodes", type=_positive_int, default=20,
+                   help="evaluation episodes (default 20)")
+    p.add_argument("--seed", type=int, default=10_000,
+                   help="seed of the first episode (default 10000)")
+    p.add_argument("--best", action="store_true",
+                   help="evaluate the evaluation callback's best model (RUN/best)")
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("compare-controllers",
                        help="train and compare controllers seeing different observations")
-    p.add_argument("--env", required=True)
+    p.add_argument("--env", required=True, help="environment id")
     p.add_argument("--observations", default="true,measurement,ekf",
-                   help="comma-separated: true, measurement and/or estimator names")
-    p.add_argument("--seeds", type=int, default=3, help="number of seeds per observation")
-    p.add_argument("--steps", type=int, default=50_000)
-    p.add_argument("--algo", default="ppo", choices=["ppo", "sac"])
-    p.add_argument("--episodes", type=int, default=20)
-    p.add_argument("--estimator-kwargs", type=_json_dict, default={},
-                   help="JSON object: estimator name -> its options")
-    p.add_argument("--env-kwargs", type=_json_dict, default={})
-    p.add_argument("--algo-kwargs", type=_json_dict, default={})
-    p.add_argument("--n-envs", type=int, default=8)
-    p.add_argument("--out", required=True)
-    p.add_argument("--no-progress", action="store_true")
+                   help="comma-separated kinds: true, measurement, measurement-stack, "
+                        "recurrent, estimator names, lqg, pid (default true,measurement,ekf)")
+    p.add_argument("--seeds", type=_positive_int, default=3,
+                   help="seeds 0..N-1 per kind (default 3)")
+    _add_training_options(p)
+    _add_runner_options(p)
     p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("benchmark-controllers",
+                       help="the published benchmark: Orbit, VanDerPol, PendulumSlider x "
+                            "eight kinds x 5 seeds (about 90 min on 2 cores)")
+    p.add_argument("--quick", action="store_true",
+                   help="2 seeds and tiny budgets: checks the pipeline in under 3 minutes")
+    p.add_argument("--out", default="benchmark", help="output folder (default benchmark)")
+    p.add_argument("--seeds", type=_positive_int, default=None,
+                   help="seeds per learned kind (default 5; 2 with --quick)")
+    p.add_argument("--plants", default=None,
+                   help="comma-separated subset of the plants (default all three)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_runner_options(p)
+    p.set_defaults(func=_cmd_benchmark)
 
     p = sub.add_parser(
         "watch", help="record one episode as a GIF or MP4, the estimate drawn over the plant",

@@ -56,11 +56,12 @@ from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
 from . import _floors
 from . import estimators as est_bench
+from . import training as training_bench
 from ._timing import env_stepper, interleaved, stepper, vector_stepper
 from .kalman_speed import kalman_section, print_kalman
 from .targets import print_targets, ratio, targets
 
-SECTIONS = ("kalman", "estimators", "envs", "wrappers")
+SECTIONS = ("kalman", "estimators", "envs", "wrappers", "training")
 
 
 # ---------------------------------------------------------------------------- 2. estimators
@@ -206,7 +207,8 @@ Runner = tuple[Callable[[bool], Any], Callable[[Any], None]]
 RUNNERS: dict[str, Runner] = {"kalman": (kalman_section, print_kalman),
                               "estimators": (est_bench.run, print_estimators),
                               "envs": (envs_section, print_envs),
-                              "wrappers": (wrappers_section, print_wrappers)}
+                              "wrappers": (wrappers_section, print_wrappers),
+                              "training": (training_bench.run, training_bench.print_results)}
 
 
 def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = True

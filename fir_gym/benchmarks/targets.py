@@ -27,7 +27,7 @@ def ratio(a: float | None, b: float | None) -> float | None:
 
 
 def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
-    """Every target of issues 3, 5, 7 and 9 with its measured ratio."""
+    """Every target of issues 3, 5, 7, 9 and 13 with its measured ratio."""
     out: list[dict[str, Any]] = []
 
     def add(what: str, value: float | None, limit: float, upper: bool,
@@ -70,6 +70,12 @@ def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
                 f"{r['mode']}×64: wrapped / bare", r["ratio"],
                 1.3 if r["mode"] == "native" else 1.2, True,
                 None if floor is None else (r["bare_us"] + floor) / r["bare_us"])
+    t = results.get("training")
+    if t and "skipped" not in t:
+        from .training import targets as training_targets
+
+        for what, value, limit, ceiling in training_targets(t):
+            add(what, value, limit, False, ceiling)
     return out
 
 
@@ -85,4 +91,5 @@ def print_targets(rows: list[dict[str, Any]]) -> None:
           "PendulumSlider: MuJoCo's own steps with the friction law, no env around them; "
           "wrapper: bare plus what a 64-system EKF step cannot skip — the plant model's "
           "f, F, h, H and the filter's fixed cost (a one-state model whose callables return "
-          "ready arrays)")
+          "ready arrays); SB3 stepping: the bare native vector env plus the batched EKF; "
+          "PPO training: PPO's own cost per sample (a VecEnv whose step is free)")

@@ -80,7 +80,8 @@ def simulate_noise_input(seed: int, n: int, G: np.ndarray, params: Mapping[str, 
         return np.stack([z[:, 1], -z[:, 0] + eps * (1.0 - z[:, 0] ** 2) * z[:, 1]], axis=1)
 
     for k in range(steps):
-        dW = sd_w * rng.standard_normal((m, n, G.shape[1]))
+        # drawn batch first, as the env draws (one run's increments in a row)
+        dW = sd_w * np.moveaxis(rng.standard_normal((n, m, G.shape[1])), 1, 0)
         total = 0.5 * x[:, 0]
         for j in range(m):
             g = dW[j] @ G.T

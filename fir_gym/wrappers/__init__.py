@@ -3,6 +3,7 @@
 from .baselines import MeasurementObservation, TrueStateObservation
 from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
 from .factory import wrap_observation
+from .measurement_stack import MeasurementStack, VectorMeasurementStack
 from .shadow import ShadowEstimator
 from .vector_estimator_observation import VectorEstimatorObservation
 
@@ -10,9 +11,11 @@ __all__ = [
     "OBSERVATION_KINDS",
     "EstimatorObservation",
     "MeasurementObservation",
+    "MeasurementStack",
     "ShadowEstimator",
     "TrueStateObservation",
     "VectorEstimatorObservation",
+    "VectorMeasurementStack",
     "default_prior",
     "wrap_observation",
 ]

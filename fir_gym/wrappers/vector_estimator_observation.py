@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from typing import Any, cast
 
 import gymnasium as gym
@@ -31,8 +32,8 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
 
     Args:
         env: a vector env of a fir-gym plant — ``gym.make_vec(id, n, vectorization_mode=
-            "sync" | "async" | "vector_entry_point")`` — in next-step autoreset mode
-            (Gymnasium's default).
+            "sync" | "async" | "vector_entry_point")`` — in next-step (Gymnasium's
+            default) or same-step autoreset mode.
         estimator: an :class:`~fir_gym.estimators.Estimator` class or registry name
             (built once, for the batch, from the plant's model with ``**options``).
         observation: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``,
@@ -44,7 +45,12 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     When a sub-env ends an episode, the next step autoresets it (returning ``y[0]``
     of a new episode): its system is then restarted (:meth:`Estimator.restart`) and
     that measurement is its first, exactly as a fresh one-env
-    :class:`EstimatorObservation` would do. ``info`` gains ``estimate``,
+    :class:`EstimatorObservation` would do. In same-step mode the sub-env returns the
+    new episode's first measurement in the step that ended the old one, with the last
+    one in ``info["final_obs"]``: a copy of the estimator consumes the last
+    measurements (their estimates become ``info["final_obs"]``, and
+    ``info["final_info"]`` is annotated with them), then the ended systems restart
+    and consume the first ones. ``info`` gains ``estimate``,
     ``estimation_error`` (where ``state`` is known) and ``estimator_diverged``, each
     with Gymnasium's ``_key`` mask.
 
@@ -59,10 +65,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     def __init__(self, env: VectorEnv, estimator: type[Estimator] | str,
                  observation: str = "estimate", **options: Any) -> None:
         super().__init__(env)
-        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
-        if mode != AutoresetMode.NEXT_STEP:
-            raise ValueError(f"VectorEstimatorObservation follows next-step autoreset; this "
-                             f"vector env uses {mode}")
+        self._same_step = same_step_mode(env, type(self).__name__)
         one_of("observation", observation, OBSERVATION_KINDS)
         if isinstance(estimator, Estimator):
             raise TypeError("give VectorEstimatorObservation an estimator class or name (it "
@@ -114,11 +117,32 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         applied = info.get("action", actions)
         u = np.asarray(applied, dtype=np.float64).reshape(self.num_envs, -1)
         Y = self._measurements(y)
+        ended = info.get("_final_obs") if self._same_step else None
+        if ended is not None and ended.any():
+            info = self._finish_episodes(info, ended, Y, u)
         x_hat = self.estimator.step(Y, u)
-        self._prev_done = np.logical_or(terminated, truncated)
+        if not self._same_step:
+            self._prev_done = np.logical_or(terminated, truncated)
         self._last = (x_hat.copy(), Y)
         return self._observe(x_hat, y), reward, terminated, truncated, \
             self._annotate(info, x_hat)
+
+    def _finish_episodes(self, info: dict[str, Any], ended: np.ndarray, Y: NDArray[np.float64],
+                         u: NDArray[np.float64]) -> dict[str, Any]:
+        """Same-step mode: the ended episodes' last estimates, then restart their systems."""
+        last = Y.copy()
+        final = info["final_obs"]          # an array, or (sync/async) an object array
+        for i in np.flatnonzero(ended):
+            last[i] = np.asarray(final[i], dtype=np.float64).reshape(-1)
+        finisher = copy.deepcopy(self.estimator)      # the others' step is not taken twice
+        x_last = finisher.step(last, u)
+        info = dict(info)
+        info["final_obs"] = self._observe(x_last, last, finisher)
+        final_info = info.get("final_info")
+        if isinstance(final_info, dict):
+            info["final_info"] = self._annotate(final_info, x_last, finisher)
+        self.estimator.restart(ended)
+        return info
 
     def render(self) -> Any:
         """The sub-envs' frames with each system's estimate drawn over its frame."""
@@ -141,15 +165,17 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         estimator's input, kept for :meth:`render` (one conversion per step, not two)."""
         return np.array(y, dtype=np.float64).reshape(self.num_envs, -1)
 
-    def _observe(self, x_hat: NDArray[np.float64], y: Any) -> Any:
+    def _observe(self, x_hat: NDArray[np.float64], y: Any,
+                 estimator: Estimator | None = None) -> Any:
         if self.observation_kind == "estimate":
             return x_hat
         if self.observation_kind == "estimate+covariance":
-            P = cast(NDArray[np.float64], self.estimator.P)   # provides_covariance: checked
+            P = cast(NDArray[np.float64], (estimator or self.estimator).P)   # checked: it has one
             return {"estimate": x_hat, "covariance": P[:, self._triu[0], self._triu[1]]}
         return {"estimate": x_hat, "measurement": np.asarray(y, dtype=np.float64)}
 
-    def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64]) -> dict[str, Any]:
+    def _annotate(self, info: dict[str, Any], x_hat: NDArray[np.float64],
+                  estimator: Estimator | None = None) -> dict[str, Any]:
         info = dict(info)
         everyone = np.ones(self.num_envs, dtype=bool)
         info["estimate"], info["_estimate"] = x_hat.copy(), everyone
@@ -160,11 +186,21 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             info["estimation_error"] = error if mask.all() else np.where(mask[:, None], error,
                                                                          0.0)
             info["_estimation_error"] = mask
-        diverged = self.estimator.diverged                # a fresh array (or a bool)
+        diverged = (estimator or self.estimator).diverged  # a fresh array (or a bool)
         info["estimator_diverged"] = diverged if isinstance(diverged, np.ndarray) else \
             np.full(self.num_envs, bool(diverged))
         info["_estimator_diverged"] = everyone
         return info
+
+
+def same_step_mode(env: VectorEnv, wrapper: str) -> bool:
+    """Whether ``env`` autoresets in the same step (else in the next); other modes are a
+    ValueError naming ``wrapper``."""
+    mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+    if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        raise ValueError(f"{wrapper} follows next-step or same-step autoreset; this vector "
+                         f"env uses {mode}")
+    return bool(mode == AutoresetMode.SAME_STEP)
 
 
 def _plant_attr(env: VectorEnv, name: str) -> Any:

@@ -35,9 +35,9 @@ def test_a_state_that_goes_nan_ends_the_episode_at_the_last_valid_state():
     assert_failed_step(out, "nonfinite_state", obs0, info0["state"])
     assert "x1_average" not in out[4]                  # the NaN extra is left out
     np.testing.assert_array_equal(env.state, info0["state"])
-    # staying at the start state costs what the reward says there
-    assert out[1] == pytest.approx(float(env._reward(info0["state"], np.zeros(1),
-                                                     info0["state"])))
+    # a failed step is a termination: it pays the terminal penalty (issue 13's honest
+    # tasks; the reward of staying at the start would let a policy end early cheaply)
+    assert out[1] == pytest.approx(-env.cost_cap * env.max_episode_steps)
 
 
 def test_true_state_observation_stays_finite_when_the_plant_fails():
@@ -108,8 +108,6 @@ class _RewardOverflow(CarrierMotionEnv):
     """A plant whose transition reward is not finite (as -x² is beyond 1e154)."""
 
     def _reward(self, x, a, x_next):
-        if x_next is x:                  # the reward of staying, which a failed step pays
-            return super()._reward(x, a, x_next)
         return -np.inf
 
 
@@ -219,9 +217,9 @@ def test_vector_env_sub_envs_fail_alone_with_the_same_rules():
     np.testing.assert_array_equal(obs[1], obs0[1])
     assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward))
     assert np.all(np.abs(info["state"]) <= 1e150)
-    # staying at its start state costs what the reward says there
+    # a failed step is a termination: the terminal penalty (issue 13's honest tasks)
     plant = venv.unwrapped.plant
-    assert reward[1] == pytest.approx(float(plant._reward(start[1], np.zeros(1), start[1])))
+    assert reward[1] == pytest.approx(-plant.cost_cap * plant.max_episode_steps)
     obs, reward, terminated, _, info = venv.step(np.zeros((3, 1)))     # autoreset of env 1
     assert reward[1] == 0.0 and not terminated[1]
     np.testing.assert_array_equal(info["state"][1], plant.initial_state)

@@ -20,8 +20,8 @@ def test_noise_free_step_matches_an_accurate_ode_solution():
     for a in (0.0, 0.4, -0.6):
         x = info["state"]
         _, _, _, _, info = env.step(np.array([a]))
-        sol = scipy.integrate.solve_ivp(vdp, (0, 0.1), x, args=(a * 5.0,), rtol=1e-12, atol=1e-12,
-                                        dense_output=True)
+        sol = scipy.integrate.solve_ivp(vdp, (0, 0.1), x, args=(a * env.params["u_max"],),
+                                        rtol=1e-12, atol=1e-12, dense_output=True)
         np.testing.assert_allclose(info["state"], sol.y[:, -1], atol=2e-6)
         average = scipy.integrate.quad(lambda t, s=sol: s.sol(t)[0], 0, 0.1)[0] / 0.1
         assert info["x1_average"] == pytest.approx(average, abs=2e-6)

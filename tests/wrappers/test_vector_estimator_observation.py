@@ -83,10 +83,37 @@ def test_bad_arguments():
         VectorEstimatorObservation(venv, make_estimator("ekf", venv.get_attr("model")[0]))
     with pytest.raises(ValueError, match="observation must be"):
         VectorEstimatorObservation(venv, "ekf", observation="all")
-    same_step = gym.make_vec("fir_gym/Orbit-v0", num_envs=2, vectorization_mode="sync",
-                             vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP})
-    with pytest.raises(ValueError, match="next-step autoreset"):
-        VectorEstimatorObservation(same_step, "ekf")
+    # same-step autoreset is supported too (make_sb3_vec_env's mode); disabled is not
+    disabled = gym.make_vec("fir_gym/Orbit-v0", num_envs=2, vectorization_mode="sync",
+                            vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.DISABLED})
+    with pytest.raises(ValueError, match="next-step or same-step autoreset"):
+        VectorEstimatorObservation(disabled, "ekf")
+
+
+def test_same_step_autoreset_over_sync_equals_one_env_per_sub_env():
+    """A sync vector env in same-step mode: the estimates, and the final estimates of ended
+    episodes, are those of a single-env EstimatorObservation per sub-env."""
+    from fir_gym.wrappers import EstimatorObservation
+
+    n = 2
+    venv = VectorEstimatorObservation(gym.make_vec(
+        "fir_gym/VanDerPol-v0", num_envs=n, vectorization_mode="sync", max_episode_steps=3,
+        vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}), "ekf")
+    singles = [EstimatorObservation(gym.make("fir_gym/VanDerPol-v0", max_episode_steps=3), "ekf")
+               for _ in range(n)]
+    obs, _ = venv.reset(seed=5)
+    np.testing.assert_allclose(obs, [s.reset(seed=5 + i)[0] for i, s in enumerate(singles)],
+                               rtol=1e-12)
+    rng = np.random.default_rng(0)
+    for _ in range(7):
+        actions = rng.uniform(-1, 1, (n, 1))
+        obs, _, _, _, info = venv.step(actions)
+        for i, single in enumerate(singles):
+            o, _, t, tr, _ = single.step(actions[i])
+            if t or tr:
+                np.testing.assert_allclose(info["final_obs"][i], o, rtol=1e-12)
+                o = single.reset()[0]
+            np.testing.assert_allclose(obs[i], o, rtol=1e-12)
 
 
 def test_async_vector_env_gives_the_same_numbers_as_sync():

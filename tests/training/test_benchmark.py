@@ -1,0 +1,81 @@
+"""benchmark-controllers: the --quick run end to end, and the answers computed from a table."""
+
+import json
+
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from fir_gym.cli import main
+from fir_gym.training.benchmark import KINDS, PLANTS, answers
+
+
+def _row(kind, iqm, low, high, norm=(1.0, 1.0, 1.0)):
+    return {"kind": kind, "iqm": iqm, "low": low, "high": high, "normalised": norm[0],
+            "normalised_low": norm[1], "normalised_high": norm[2]}
+
+
+def test_answers_follow_the_intervals():
+    table = {"fir_gym/Orbit-v0": [
+        _row("true", -100, -101, -99),
+        _row("ekf", -103, -106, -100, (0.97, 0.94, 1.01)),
+        _row("ukf", -120, -125, -115, (0.83, 0.8, 0.87)),
+        _row("measurement-stack", -150, -160, -140),
+        _row("recurrent", -130, -140, -120),
+        _row("lqg", -95, -95, -95)]}
+    text = answers(table)[0]
+    assert "best estimate-fed controller (ekf) scores 0.97 [0.94, 1.01]" in text
+    assert "matches it" in text
+    assert "the best filter (ekf) beats" in text and "(recurrent)" in text
+    assert "LQG beats (-95 vs -103, intervals apart) the best learned controller without " \
+           "the true state (ekf)" in text
+    assert "beats (-95 vs -100" in text
+    # within 1 %: a match, however narrow the intervals
+    table["fir_gym/Orbit-v0"][-1] = _row("lqg", -100.5, -100.5, -100.5)
+    assert "and matches (-100.5 vs -100, within 1%) PPO on the true state" in answers(table)[0]
+
+
+def test_quick_benchmark_runs_every_plant_and_kind(tmp_path, capsys):
+    assert main(["benchmark-controllers", "--quick", "--out", str(tmp_path),
+                 "--no-progress"]) == 0
+    report = json.loads((tmp_path / "results.json").read_text())
+    assert report["quick"] and set(report["tables"]) == set(PLANTS)
+    for table in report["tables"].values():
+        assert [r["kind"] for r in table] == list(KINDS)
+        estimated = {r["kind"]: r["rmse"] for r in table}
+        assert all(estimated[k] is not None for k in ("ekf", "ukf", "efir", "lqg"))
+        assert estimated["true"] is None
+    assert len(report["answers"]) == len(PLANTS)
+    text = (tmp_path / "BENCHMARK.md").read_text()
+    assert "IQM return [95% CI]" in text and "## Answers" in text
+    for env_id in PLANTS:
+        assert (tmp_path / "figures" / f"{env_id.split('/')[-1]}_learning_curves.png").is_file()
+    assert "Answers" in capsys.readouterr().out
+
+
+def test_unknown_benchmark_plant_is_an_error(tmp_path, capsys):
+    assert main(["benchmark-controllers", "--quick", "--plants", "fir_gym/Nope-v0",
+                 "--out", str(tmp_path)]) == 2
+    assert "unknown benchmark plant" in capsys.readouterr().err
+
+
+def test_answers_compare_paired_episodes_when_the_table_has_them():
+    """With each row's episode returns, a kind that is worse on every shared episode loses
+    although its interval overlaps the other's; a noisy difference around 0 is a tie."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    e = rng.normal(-100.0, 30.0, size=20)
+    noise = np.where(np.arange(20) % 2 == 0, 20.0, -20.0) - 2.5
+    rows = {"true": [e], "ekf": [e + noise], "recurrent": [e - 40.0], "lqg": [e - 2.0]}
+    table = []
+    for kind, runs in rows.items():
+        mean = float(np.mean(runs[0]))
+        table.append({**_row(kind, mean, mean - 15, mean + 15), "episode_returns": runs})
+    text = answers({"fir_gym/Orbit-v0": table})[0]
+    assert "and loses to (-107.5 vs -105.5, paired difference [-2, -2]) PPO on the true " \
+           "state" in text
+    assert "the best filter (ekf) beats" in text
+    table[-1]["episode_returns"] = [e + noise]
+    table[-1]["iqm"] = float(np.mean(e + noise))
+    assert "contains 0) PPO on the true state" in answers({"fir_gym/Orbit-v0": table})[0]
