@@ -245,12 +245,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--policy", default="zero", metavar="|".join((*WATCH_POLICIES, "RUN")),
                    help="'zero' (no action), 'lqg' (the LQR of the plant's nominal model on "
                         "the estimate) or a run folder written by `fir-gym train`")
-    p.add_argument("--steps", type=positive_int, default=None,
+    # --steps and --every are checked by fir_gym.video.watch (the same message in Python)
+    p.add_argument("--steps", type=int, default=None,
                    help="at most this many steps (default: the whole episode)")
     p.add_argument("--seed", type=int, default=0, help="the episode's seed")
     p.add_argument("--fps", type=float, default=None,
                    help="frames per second (default: the plant's render_fps)")
-    p.add_argument("--every", type=positive_int, default=1,
+    p.add_argument("--every", type=int, default=1,
                    help="keep every N-th step's frame (default: 1, every step)")
     p.add_argument("--estimator-kwargs", type=json_dict, default={},
                    help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
