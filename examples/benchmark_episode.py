@@ -14,6 +14,7 @@ Carlo experiment.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -25,11 +26,12 @@ ESTIMATORS: dict[str, dict] = {"ekf": {}, "ukf": {}, "efir": {}, "cd-ekf": {}, "
 def episode(name: str, options: dict, steps: int, seed: int) -> dict:
     env = gym.make("fir_gym:fir_gym/VanDerPol-v0", estimator=name,
                    estimator_kwargs=options)
-    obs, info = env.reset(seed=seed)
+    _, info = env.reset(seed=seed)
     truth, errors, diverged = [info["state"]], [info["estimation_error"]], False
-    zero = np.zeros(env.action_space.shape, dtype=np.float32)
+    plant: Any = env.unwrapped
+    zero = np.zeros(plant.action_space.shape, dtype=np.float32)
     for _ in range(steps):
-        obs, _, terminated, truncated, info = env.step(zero)
+        _, _, terminated, truncated, info = env.step(zero)
         truth.append(info["state"])
         errors.append(info["estimation_error"])
         diverged |= bool(info["estimator_diverged"])
@@ -38,7 +40,7 @@ def episode(name: str, options: dict, steps: int, seed: int) -> dict:
     env.close()
     e = np.array(errors)
     return {"truth": np.array(truth), "rmse": np.sqrt(np.mean(e**2, axis=0)),
-            "diverged": diverged, "names": env.unwrapped.state_names}
+            "diverged": diverged, "names": plant.state_names}
 
 
 def main(argv: list[str] | None = None) -> int:

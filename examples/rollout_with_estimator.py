@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -27,13 +28,14 @@ def main(argv: list[str] | None = None) -> int:
 
     # The "fir_gym:" prefix imports fir_gym (which registers its ids) before the lookup.
     env = gym.make("fir_gym:fir_gym/Orbit-v0", estimator="ekf")
-    obs, info = env.reset(seed=args.seed)
+    _, info = env.reset(seed=args.seed)
     truth, estimates, covariances = [info["state"]], [info["estimate"]], []
+    plant: Any = env.unwrapped
     estimator = env.get_wrapper_attr("estimator")
     covariances.append(estimator.P.copy())
     for _ in range(args.steps):
-        action = np.zeros(env.action_space.shape, dtype=np.float32)   # zero thrust
-        obs, reward, terminated, truncated, info = env.step(action)
+        action = np.zeros(plant.action_space.shape, dtype=np.float32)   # zero thrust
+        _, _, terminated, truncated, info = env.step(action)
         if info["estimator_diverged"]:
             print("the EKF diverged; stopping")
             break
@@ -46,13 +48,13 @@ def main(argv: list[str] | None = None) -> int:
 
     x, x_hat = np.array(truth), np.array(estimates)
     rmse = np.sqrt(np.mean((x - x_hat) ** 2, axis=0))
-    names = env.unwrapped.state_names
+    names = plant.state_names
     print(f"{len(x) - 1} steps; EKF RMSE " + ", ".join(
         f"{n} {v:.3g}" for n, v in zip(names, rmse, strict=True)))
 
     from fir_gym.plotting import plot_estimates
 
-    dt = float(env.unwrapped.time_step)
+    dt = float(plant.time_step)
     fig = plot_estimates(dt * np.arange(len(x)), x_hat, x, np.array(covariances),
                          names=names, label="EKF")
     fig.savefig(out / "orbit_ekf.png")
