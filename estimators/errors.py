@@ -68,9 +68,10 @@ def check_options(cls: type, options: Iterable[str], label: str | None = None) -
     for name in bad:
         if name.lower() in NOISE_NAMES:
             hints.append(f"{name!r} is the model's noise, not an option of the filter: set "
-                         "the plant's nominal parameters, gym.make(id, nominal={...}) "
-                         "(env.unwrapped.nominal_params lists them), or build the filter "
-                         "on a model with that noise")
+                         f"the plant's nominal parameters, gym.make(id, nominal={{{name!r}: "
+                         f"...}}) (on the command line --env-kwargs '{{\"nominal\": "
+                         f"{{\"{name}\": ...}}}}'; env.unwrapped.nominal_params lists them), "
+                         "or build the filter on a model with that noise")
         else:
             near = difflib.get_close_matches(name, accepted, n=1)
             if near:

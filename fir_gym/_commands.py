@@ -114,7 +114,27 @@ def working(label: str, *, enabled: bool = True) -> Iterator[None]:
             print(f"\r{label}: {time.monotonic() - start:.0f} s", file=sys.stderr, flush=True)
 
 
+def check_estimator_options(kind_kwargs: dict[str, Any]) -> None:
+    """The estimator kinds' options checked at the estimator boundary, before any work:
+    an option the filter does not take is named with the ones it accepts and a hint
+    (``nominal=`` for noise, the near miss), as ``gym.make`` would say it."""
+    from .estimators import estimator_class, estimator_names
+    from .estimators.errors import check_options
+
+    names = estimator_names()
+    for kind, options in kind_kwargs.items():
+        if not isinstance(options, dict):
+            continue                      # the kinds' own check names the format
+        if kind in names:
+            check_options(estimator_class(kind), options, label=kind)
+        elif kind == "lqg" and options.get("estimator", "ekf") in names:
+            name = options.get("estimator", "ekf")
+            check_options(estimator_class(name), [k for k in options if k != "estimator"],
+                          label=f"lqg's estimator {name}")
+
+
 def cmd_train(args: argparse.Namespace) -> int:
+    check_estimator_options(args.kind_kwargs)
     from .training import RunConfig, evaluate, kind_options, train
     from .training.compare import validate
 
@@ -149,6 +169,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     elif args.kind not in ("lqg", "pid"):
         raise ValueError(f"--kind {args.kind} is learned: train it, then evaluate "
                          "its folder with --model")
+    check_estimator_options(args.kind_kwargs)
     from .training import RunConfig, evaluate, kind_options
 
     if args.model:
@@ -181,6 +202,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
     kinds = [k.strip() for k in args.observations.split(",") if k.strip()]
     seeds = list(range(args.seeds))
+    check_estimator_options(args.kind_kwargs)
     with _runner(args) as runner:
         summary = compare_controllers(
             args.env, kinds, seeds, args.out, steps=args.steps, algo=args.algo,

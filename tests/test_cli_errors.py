@@ -96,6 +96,20 @@ def test_estimator_kwargs_mistakes(tmp_path, capsys):
     assert not Path(gif).exists()
 
 
+def test_estimator_options_of_train_evaluate_and_compare(tmp_path, capsys):
+    """The same message for a kind's estimator options, before any training starts."""
+    one_line(capsys, ["train", "--env", "fir_gym/Orbit-v0", "--kind", "ekf", "--kind-kwargs",
+                      '{"ekf": {"Q": 1}}', "--out", str(tmp_path / "r")],
+             "ekf (ExtendedKalmanFilter)", "'Q'", "nominal")
+    one_line(capsys, ["evaluate", "--env", "fir_gym/Orbit-v0", "--kind", "lqg",
+                      "--kind-kwargs", '{"lqg": {"estimator": "ukf", "alpah": 1}}'],
+             "UnscentedKalmanFilter", "did you mean 'alpha'")
+    one_line(capsys, ["compare-controllers", "--env", "fir_gym/Orbit-v0", "--observations",
+                      "efir", "--kind-kwargs", '{"efir": {"horizn": 5}}', "--out",
+                      str(tmp_path / "c")], "efir (ExtendedFIRFilter)", "'horizon'")
+    assert not list(tmp_path.iterdir())
+
+
 def test_parse_mistakes_are_one_line(capsys):
     one_line(capsys, ["nonsense"], "invalid choice")
     one_line(capsys, ["reproduce", "--paper", "007"], "--paper", "000,001")
