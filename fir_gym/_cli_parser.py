@@ -102,12 +102,12 @@ def _add_training_options(p: argparse.ArgumentParser) -> None:
                    choices=["estimate", "estimate+covariance", "estimate+measurement"],
                    help="what an estimator kind shows the controller")
     p.add_argument("--kind-kwargs", "--estimator-kwargs", dest="kind_kwargs", type=json_dict,
-                   default={}, help="JSON object: kind -> its options, e.g. "
+                   metavar="JSON", default={}, help="JSON object: kind -> its options, e.g. "
                                     "'{\"efir\": {\"horizon\": 50}}' (default: none)")
-    p.add_argument("--env-kwargs", type=json_dict, default={},
+    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object of plant options, e.g. '{\"max_episode_steps\": 300}' "
                         "(default: none)")
-    p.add_argument("--algo-kwargs", type=json_dict, default={},
+    p.add_argument("--algo-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object overriding the YAML's algorithm settings (default: none)")
     p.add_argument("--episodes", type=positive_int, default=20,
                    help="evaluation episodes per run")
@@ -194,9 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                "(default: none)")
     p.add_argument("--kind", default=None, help="lqg or pid, classical: nothing to train "
                                                 "(default: none)")
-    p.add_argument("--kind-kwargs", type=json_dict, default={},
+    p.add_argument("--kind-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object: kind -> its options (default: none)")
-    p.add_argument("--env-kwargs", type=json_dict, default={},
+    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object of plant options (default: none)")
     p.add_argument("--episodes", type=positive_int, default=20, help="evaluation episodes")
     p.add_argument("--seed", type=int, default=10_000, help="seed of the first episode")
@@ -253,10 +253,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames per second (default: the plant's render_fps)")
     p.add_argument("--every", type=int, default=1,
                    help="keep every N-th step's frame (default: 1, every step)")
-    p.add_argument("--estimator-kwargs", type=json_dict, default={},
+    p.add_argument("--estimator-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
                         "(default: none)")
-    p.add_argument("--env-kwargs", type=json_dict, default={},
+    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
                    help="JSON object of gym.make options, e.g. '{\"nominal\": {\"mu\": 19.9}}' "
                         "(default: none)")
     p.add_argument("--out", required=True,
