@@ -13,6 +13,7 @@ from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
 from .discretize import discretize_lti, linear_model_from_continuous
 from .efir import ExtendedFIRFilter
+from .errors import EstimatorOptionError, IncompatibleModelError
 from .extended import ExtendedKalmanFilter
 from .fir import FIRFilter
 from .fir_smoother import FIRSmoother
@@ -40,10 +41,12 @@ __all__ = [
     "ContinuousModel",
     "CubatureSigmaPoints",
     "Estimator",
+    "EstimatorOptionError",
     "ExtendedFIRFilter",
     "ExtendedKalmanFilter",
     "FIRFilter",
     "FIRSmoother",
+    "IncompatibleModelError",
     "Innovation",
     "KalmanFilter",
     "LinearModel",

@@ -66,6 +66,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, one_of, positive
 from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
+from .errors import IncompatibleModelError
 from .registry import register_estimator
 
 __all__ = ["BlockPulseKalmanFilter", "RiccatiPath", "RiccatiStep", "bpf_riccati",
@@ -274,8 +275,9 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
         self.riccati = one_of("riccati", riccati, RICCATI_FORMS)
         self.max_condition = positive("max_condition", max_condition)
         if isinstance(model, ContinuousModel) and not model.has_factorisation:
-            raise ValueError(f"model {model.name!r} has no factorisation A(x); the block-pulse "
-                             "filter freezes A(x) on each interval (paper 002, eq 2.2)")
+            raise IncompatibleModelError(
+                f"model {model.name!r} has no factorisation A(x); the block-pulse filter "
+                "freezes A(x) on each interval (paper 002, eq 2.2): use 'cd-ekf'")
         super().__init__(model, x0=x0, P0=P0, **options)
 
     def _reset_state(self) -> None:

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 from ._fir_bank import WindowBank, information_is_regular
 from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import WindowedEstimator
+from .errors import needs_linear
 from .fir_gains import (
     WINDOW_FORMS,
     GainResult,
@@ -114,8 +115,8 @@ class FIRFilter(WindowedEstimator):
                  **options: Any) -> None:
         if not (isinstance(model, StateSpaceModel) and model.is_linear
                 and hasattr(model, "matrices")):
-            raise TypeError(f"{type(self).__name__} needs a LinearModel or "
-                            f"TimeVaryingLinearModel; got {type(model).__name__}")
+            raise needs_linear(type(self).__name__, model,
+                               "'efir' (ExtendedFIRFilter), the FIR filter of a nonlinear model")
         self.horizon = positive("horizon", horizon, integer=True)
         one_of("form", form, WINDOW_FORMS)
         one_of("gain", gain, sorted(GAINS))

@@ -28,6 +28,7 @@ from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, sy
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
+from .errors import needs_linear
 from .model import StateSpaceModel, SystemMatrices
 from .registry import register_estimator
 
@@ -250,9 +251,8 @@ class KalmanFilter(Estimator):
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
         if not getattr(model, "is_linear", False) or not hasattr(model, "matrices"):
-            raise TypeError(f"model must be a LinearModel or TimeVaryingLinearModel for "
-                            f"{type(self).__name__}; got {type(model).__name__} "
-                            f"(use ExtendedKalmanFilter or UnscentedKalmanFilter)")
+            raise needs_linear(type(self).__name__, model,
+                               "'ekf' (ExtendedKalmanFilter) or 'ukf' (UnscentedKalmanFilter)")
         self._constant = bool(getattr(model, "time_invariant", True))
         if self._constant:
             self._mats = self._prepare(model.matrices(0))

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, positive
+from .errors import needs_linear
 from .fir import FIRFilter, _combined_gain
 from .fir_gains import input_gain
 from .model import StateSpaceModel
@@ -79,7 +80,8 @@ class RecursiveFIRFilter(FIRFilter):
                  x0: ArrayLike | None = None, P0: ArrayLike | None = None,
                  **options: Any) -> None:
         if not getattr(model, "time_invariant", False) or not model.is_linear:
-            raise TypeError("RecursiveFIRFilter needs a time-invariant LinearModel")
+            raise needs_linear("RecursiveFIRFilter (time-invariant)", model,
+                               "'efir' (ExtendedFIRFilter), the FIR filter of a nonlinear model")
         if options.get("nan_policy", "raise") != "raise":
             raise ValueError("RecursiveFIRFilter needs every measurement: nan_policy must be "
                              "'raise' (use FIRFilter for missing data)")

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from .base import Estimator
+from .errors import check_options
 from .model import StateSpaceModel
 
 _REGISTRY: dict[str, type[Estimator]] = {}
@@ -42,5 +43,11 @@ def estimator_class(name: str) -> type[Estimator]:
 
 
 def make_estimator(name: str, model: StateSpaceModel, **options: Any) -> Estimator:
-    """Build the estimator registered under ``name`` for ``model`` with ``options``."""
-    return estimator_class(name)(model, **options)
+    """Build the estimator registered under ``name`` for ``model`` with ``options``.
+
+    An option the estimator does not take is an
+    :class:`~fir_gym.estimators.errors.EstimatorOptionError` that lists the ones it does.
+    """
+    cls = estimator_class(name)
+    check_options(cls, options, label=name)
+    return cls(model, **options)

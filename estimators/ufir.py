@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, one_of
+from .errors import needs_linear
 from .fir import FIRFilter, _window_from_history
 from .fir_gains import GainResult, Window, information_is_regular
 from .model import StateSpaceModel
@@ -133,7 +134,8 @@ class UFIRFilter(FIRFilter):
     @staticmethod
     def _fir_model(model: StateSpaceModel) -> StateSpaceModel:
         if not hasattr(model, "matrices"):
-            raise TypeError(f"UFIRFilter needs a linear model; got {type(model).__name__}")
+            raise needs_linear("UFIRFilter", model,
+                               "'efir' (ExtendedFIRFilter), the FIR filter of a nonlinear model")
         return model.replace(Q=np.zeros((model.n_w, model.n_w)), R=np.eye(model.n_y))
 
     def _compute_gain(self, win: Window, prior: FloatArray | None = None) -> GainResult:

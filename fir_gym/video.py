@@ -5,6 +5,9 @@ estimator's marker, 2σ region and the measurement drawn over every frame
 (:meth:`fir_gym.wrappers.EstimatorObservation.render`), driven by a policy:
 
 * ``"zero"`` — no action (the plant's free motion);
+* ``"lqg"`` — :class:`fir_gym.controllers.LQGController`: the LQR of the plant's nominal
+  model, designed at its operating point, acting on the estimate it is drawn with (the
+  classical baseline of ``fir-gym compare-controllers``);
 * a run folder written by ``fir-gym train`` (``run.json``, ``model.zip``,
   ``vecnormalize.pkl``) — the trained controller, fed the observation it was trained
   on, normalised with the run's statistics. A run that observes an estimator is
@@ -30,19 +33,16 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from ._extras import INSTALL, MissingExtra
 from .wrappers import ShadowEstimator, wrap_observation
 
 #: the file types :func:`watch` writes
 VIDEO_SUFFIXES = (".gif", ".mp4")
 #: what ``--policy`` accepts besides a run folder
-POLICIES = ("zero",)
-EXTRA = 'pip install "fir-gym[video]"'
+POLICIES = ("zero", "lqg")
+EXTRA = INSTALL["video"]
 
 Policy = Callable[[Any], NDArray[Any]]
-
-
-class MissingExtra(ModuleNotFoundError):
-    """A package of an optional extra is not installed; the message says how to get it."""
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ def watch(
         out: the video file, ``.gif`` or ``.mp4``.
         estimator: the estimator drawn (a registry name); with a run that observes an
             estimator, ``None`` or that estimator.
-        policy: ``"zero"`` or a run folder of ``fir-gym train``.
+        policy: ``"zero"``, ``"lqg"`` or a run folder of ``fir-gym train``.
         steps: at most this many steps (default: the episode's length).
         seed: the episode's seed (``reset(seed=...)``).
         fps: frames per second of the video (default: the plant's ``render_fps``).
@@ -138,6 +138,11 @@ def _env_and_policy(env_id: str | None, estimator: str | None, policy: str | Pat
             raise ValueError("estimator is needed: the video draws its estimate")
         env = gym.make(env_id, render_mode="rgb_array", estimator=estimator,
                        estimator_kwargs=estimator_kwargs, **env_kwargs)
+        if str(policy) == "lqg":
+            from .controllers import LQGController
+
+            controller = LQGController(env)
+            return env, lambda obs: np.asarray(controller.predict(obs)[0])
         zeros: NDArray[Any] = np.zeros(env.action_space.shape or (), dtype=np.float32)
         return env, lambda obs: zeros
     return _run_env_and_policy(Path(policy), env_id, estimator, estimator_kwargs, env_kwargs)
@@ -182,7 +187,7 @@ def _trained_policy(run: Path, algo: str, env: gym.Env) -> Policy:
         from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     except ModuleNotFoundError as err:
         raise MissingExtra(f"a run's policy needs stable-baselines3 ({err.name} is missing): "
-                           'pip install torch==2.13.0 && pip install "fir-gym[rl]"') from None
+                           f"{INSTALL['rl']}") from None
     algorithm: Any = {"ppo": PPO, "sac": SAC}[algo]
     model = algorithm.load(run / "model.zip", device="cpu")
     stats = VecNormalize.load(str(run / "vecnormalize.pkl"), DummyVecEnv([lambda: env]))

@@ -148,3 +148,27 @@ def test_a_missing_extra_names_the_install_that_fixes_it(tmp_path, capsys, monke
     monkeypatch.setitem(sys.modules, "imageio", None)
     one_line_error(capsys, ["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf",
                             "--out", str(tmp_path / "x.gif")], 'pip install "fir-gym[video]"')
+
+
+def test_watch_lqg_plays_the_classical_controller_evaluate_plays(tmp_path, capsys):
+    """``--policy lqg`` is fir_gym.controllers.LQGController on the estimate drawn; the
+    oracle is fir_gym.training.evaluate of the ``lqg`` kind with the same estimator, seed
+    and episode length (its Monitor rounds returns to 6 decimals)."""
+    pytest.importorskip("stable_baselines3")
+    from fir_gym.training import RunConfig, evaluate
+    from fir_gym.video import watch
+
+    env_kwargs = {"max_episode_steps": 30}
+    rec = watch("fir_gym/CarrierMotion-v0", tmp_path / "lqg.gif", estimator="kf",
+                policy="lqg", seed=5, every=10, env_kwargs=env_kwargs)
+    config = RunConfig(env_id="fir_gym/CarrierMotion-v0", observation_kind="lqg",
+                       kind_kwargs={"estimator": "kf"}, env_kwargs=env_kwargs)
+    reference = evaluate(config, episodes=1, seed=5).returns[0]
+    assert rec.episode_return == pytest.approx(reference, abs=5e-7)
+    assert rec.steps == 30 and rec.frames == 4 and len(imageio.mimread(rec.path)) == 4
+    zero = watch("fir_gym/CarrierMotion-v0", tmp_path / "zero.gif", estimator="kf",
+                 policy="zero", seed=5, every=30, env_kwargs=env_kwargs)
+    assert zero.episode_return != pytest.approx(rec.episode_return, abs=1e-3)  # it acts
+    assert main(["watch", "--env", "fir_gym/CarrierMotion-v0", "--estimator", "kf",
+                 "--policy", "lqg", "--steps", "3", "--out", str(tmp_path / "c.gif")]) == 0
+    assert "4 frames" in capsys.readouterr().out

@@ -71,7 +71,7 @@ def sim2_model() -> StateSpaceModel:
 
 
 def _ekf(model: StateSpaceModel) -> Any:
-    """The project's EKF; a minimal inline one if it is not importable."""
+    """fir-gym's EKF; a minimal inline one if it is not importable."""
     try:
         from fir_gym.estimators.extended import ExtendedKalmanFilter
         return ExtendedKalmanFilter(model, x0=[0.0, 0.0, 0.5], P0=2.0 * np.eye(3))
@@ -224,16 +224,16 @@ def orbit_errors(steps: int = 20000, seed: int = 0) -> dict[str, Any]:
             "nominal_drift": nominal - info["state"]}
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Print the benchmarks (``--orbit`` adds the long Orbit-v0 accuracy run)."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="smaller horizons")
-    ap.add_argument("--orbit", action="store_true", help="also the long Orbit-v0 run")
-    args = ap.parse_args(argv)
-    g = growth((25, 50, 100, 200, 400) if args.quick else (25, 50, 100, 200, 400, 800),
-               (10, 50, 200, 800) if args.quick else (10, 50, 200, 800, 3200))
+def growth_section(quick: bool) -> dict[str, Any]:
+    """:func:`growth` at the horizons of a quick or a full run (``fir-gym speed fir``)."""
+    return growth((25, 50, 100, 200, 400) if quick else (25, 50, 100, 200, 400, 800),
+                  (10, 50, 200, 800) if quick else (10, 50, 200, 800, 3200))
+
+
+def print_growth(g: dict[str, Any]) -> None:
+    """The table of :func:`growth`: seconds per gain and per time-varying filter step."""
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
-    print(f"1. growth: seconds per call (n = 3, p = 1; OPENBLAS_NUM_THREADS={threads})")
+    print(f"FIR gain growth: seconds per call (n = 3, p = 1; OPENBLAS_NUM_THREADS={threads})")
     print(f"{'N':>6} {'(c) two-stage gain':>20} {'(a) batch gain':>16}")
     for N, tc, ta in g["rows"]:
         print(f"{N:>6} {tc:>20.3e} {ta:>16.3e}")
@@ -242,6 +242,16 @@ def main(argv: list[str] | None = None) -> None:
     for N, tb in g["bank_rows"]:
         print(f"{N:>6} {tb:>48.3e}")
     print(f"   fitted exponent (N >= 200): {g['alpha_bank']:.2f}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print the benchmarks (``--orbit`` adds the long Orbit-v0 accuracy run)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller horizons")
+    ap.add_argument("--orbit", action="store_true", help="also the long Orbit-v0 run")
+    args = ap.parse_args(argv)
+    print("1. ", end="")
+    print_growth(growth_section(args.quick))
     s = speed()
     print(f"2. speed (n = 3, N = 10, one system): EFIR {s['efir'] * 1e6:.1f} us, "
           f"EKF {s['ekf'] * 1e6:.1f} us, ratio {s['ratio']:.2f} (target <= 2)")

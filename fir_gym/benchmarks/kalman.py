@@ -7,7 +7,7 @@ nonlinear model, and — when filterpy is importable (``pip install fir-gym[benc
 — filterpy's ``KalmanFilter``/``ExtendedKalmanFilter``/``UnscentedKalmanFilter`` on
 the same models with the same sigma-point parameters, and the ratios.
 
-Targets (issue 3): single-step KF and EKF at most filterpy's time, UKF at most
+Targets: single-step KF and EKF at most filterpy's time, UKF at most
 half of it, batched KF/EKF at most 0.5 µs per system-step. The KF figure is
 measured after the Riccati recursion has converged (the steady-state regime of
 ``KalmanFilter``); the transient figure (``kf-full``: the same filter with one

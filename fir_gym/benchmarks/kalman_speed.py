@@ -1,6 +1,6 @@
 """Section 1 of ``fir-gym speed``: the Kalman family and the EFIR, against filterpy.
 
-* KF, EKF and UKF on issue 3's two models (2-state/1-output linear, 4-state/2-output
+* KF, EKF and UKF on two models (2-state/1-output linear, 4-state/2-output
   nonlinear), one system and batched at B = 1024, beside filterpy's filters on the same
   models and data — on **consistent** data (noise as the model's ``R``) and on
   **mismatched** data (ten times the model's noise: the filter flags divergence and
@@ -48,7 +48,7 @@ KALMAN_CASES: tuple[tuple[str, str, str, str, dict[str, Any]], ...] = (
 
 
 def kalman_section(quick: bool) -> dict[str, Any]:
-    """Issue 3's models against filterpy, the EFIR against the EKF (issue 4's model), and
+    """The two models against filterpy, the EFIR against the EKF (paper 000's sim 2), and
     the step's fixed cost.
 
     Ours (one system), filterpy and ours batched at B = 1024 are timed in alternating
@@ -149,7 +149,8 @@ def _efir_batched(quick: bool) -> dict[str, Any]:
 
 
 def print_kalman(res: dict[str, Any]) -> None:
-    print("\n1. Kalman family on issue 3's models, against filterpy (α = 1 for both UKFs)\n")
+    print("\n1. Kalman family on a linear 2x1 and a nonlinear 4x2 model, against filterpy "
+          "(α = 1 for both UKFs)\n")
     rows = [[r["model"], r["filter"], r["data"], r["single_us"], r["filterpy_us"], r["ratio"],
              r["batched_us"], r["throughput_vs_filterpy"], r.get("compiled_speedup"),
              f"{'yes' if r['flagged'] else 'no'} / {r.get('flagged_batched', 0.0):.0%}"]

@@ -1,10 +1,10 @@
 """Every speed figure of fir-gym in one run, as ratios to references timed in the same run.
 
 ``fir-gym speed [SECTION ...] [--json PATH] [--quick]`` (or
-``python scripts/bench_speed.py ...``; sections ``kalman estimators envs wrappers``, default
-all) prints five sections:
+``python scripts/bench_speed.py ...``; sections ``kalman estimators envs wrappers training
+fir``, default all; ``fir-gym bench`` is the same command under its old name) prints:
 
-1. **kalman** — KF, EKF and UKF on issue 3's two models (2-state/1-output linear,
+1. **kalman** — KF, EKF and UKF on two models (2-state/1-output linear,
    4-state/2-output nonlinear), single system and batched at B = 1024, on consistent
    data and on mismatched data (ten times the model's noise: the divergence flag is
    raised and stays raised), beside filterpy's filters on the same models and data:
@@ -28,6 +28,10 @@ all) prints five sections:
    measured in the same run allows (:mod:`.targets`, floors in :mod:`._floors`);
    section 1 also prints each batched filter's gain over its own numpy path (the
    compiled kernels off).
+6. **training** — stable-baselines3 on the batched plants (:mod:`.training`; needs the
+   ``rl`` extra).
+7. **fir** — the FIR gains' cost against the horizon ``N`` (two-stage recursion, batch
+   formula, time-varying filter step) with fitted exponents (:func:`.fir.growth`).
 
 Every figure is the best of a few timed blocks (the least disturbed by other load
 on the machine); compare ratios from one run, not times across runs. Set
@@ -37,7 +41,6 @@ The default run takes about two minutes; ``--quick`` about a tenth of that.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -54,14 +57,13 @@ from fir_gym.estimators import compiled
 
 from .. import ENV_IDS, VECTOR_ENV_IDS
 from ..tables import format_table
-from . import _floors
+from . import SECTIONS, _floors, speed_parser
 from . import estimators as est_bench
+from . import fir as fir_bench
 from . import training as training_bench
 from ._timing import env_stepper, interleaved, stepper, vector_stepper
 from .kalman_speed import kalman_section, print_kalman
 from .targets import print_targets, ratio, targets
-
-SECTIONS = ("kalman", "estimators", "envs", "wrappers", "training")
 
 
 # ---------------------------------------------------------------------------- 2. estimators
@@ -202,13 +204,20 @@ def print_wrappers(res: dict[str, Any]) -> None:
                        floatfmt=".3g"))
 
 
+# ---------------------------------------------------------------------------- 7. fir
+def print_fir(res: dict[str, Any]) -> None:
+    print("\n7. ", end="")
+    fir_bench.print_growth(res)
+
+
 # ---------------------------------------------------------------------------- main
 Runner = tuple[Callable[[bool], Any], Callable[[Any], None]]
 RUNNERS: dict[str, Runner] = {"kalman": (kalman_section, print_kalman),
                               "estimators": (est_bench.run, print_estimators),
                               "envs": (envs_section, print_envs),
                               "wrappers": (wrappers_section, print_wrappers),
-                              "training": (training_bench.run, training_bench.print_results)}
+                              "training": (training_bench.run, training_bench.print_results),
+                              "fir": (fir_bench.growth_section, print_fir)}
 
 
 def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = True
@@ -239,13 +248,8 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="fir-gym speed", description=__doc__.split("\n")[0])
-    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON "
-                                                       "('-' for standard output)")
-    parser.add_argument("--quick", action="store_true", help="short timings (about 10x faster)")
-    parser.add_argument("sections", nargs="*", choices=[*SECTIONS, "all"], default="all",
-                        metavar="SECTION",
-                        help=f"sections to run: {', '.join(SECTIONS)} or all (default)")
+    """``fir-gym speed [SECTION ...] [--quick] [--json PATH]`` (:func:`speed_parser`)."""
+    parser = speed_parser()
     args = parser.parse_args(argv)
     chosen = [args.sections] if isinstance(args.sections, str) else args.sections
     sections = [name for name in SECTIONS if name in chosen or "all" in chosen]

@@ -1,11 +1,11 @@
-"""The speed targets of issues 3, 5, 7, 9 and 14, judged on the results of ``fir-gym speed``.
+"""fir-gym's speed targets, judged on the results of ``fir-gym speed``.
 
 Each row gives the measured ratio, its limit, whether it is met and — where a floor
 was measured in the same run — the ceiling: the best ratio that floor allows. Where
-issue 14 tightened an earlier target (single-system KF/EKF on the 2x1 model ≤ 0.35 ×
+a later target tightened an earlier one (single-system KF/EKF on the 2x1 model ≤ 0.35 ×
 filterpy, UKF on the 4x2 model ≤ 0.2 ×, batched B = 1024 KF ≤ 0.1, EKF 4x2 ≤ 0.45,
 UKF 4x2 ≤ 2, EFIR ≤ 1.6 µs per system-step, the vector wrapper over the native
-vector env ≤ 1.3 × bare), the tighter one is the row; issue 14's also hold on
+vector env ≤ 1.3 × bare), the tighter one is the row; these also hold on
 mismatched data, and the step's fixed Python cost is ≤ 4 µs.
 """
 
@@ -27,7 +27,7 @@ def ratio(a: float | None, b: float | None) -> float | None:
 
 
 def targets(results: dict[str, Any]) -> list[dict[str, Any]]:
-    """Every target of issues 3, 5, 7, 9 and 13 with its measured ratio."""
+    """Every speed target with its measured ratio."""
     out: list[dict[str, Any]] = []
 
     def add(what: str, value: float | None, limit: float, upper: bool,

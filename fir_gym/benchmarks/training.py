@@ -1,6 +1,6 @@
 """Speed of stable-baselines3 on fir-gym's batched plants (``fir-gym speed training``).
 
-Issue 13's two targets, each a ratio of env-steps per second measured in the same run:
+Two targets, each a ratio of env-steps per second measured in the same run:
 
 * stepping :func:`fir_gym.training.make_sb3_vec_env` (Orbit-v0, 16 sub-envs,
   ``estimator="ekf"``: the native vector env and one batched EKF) with random actions,

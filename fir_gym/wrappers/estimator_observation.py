@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from fir_gym.estimators import Estimator, estimator_class, estimator_names
 from fir_gym.estimators._validation import one_of
+from fir_gym.estimators.errors import IncompatibleModelError, check_options
 
 OBSERVATION_KINDS = ("estimate", "estimate+covariance", "estimate+measurement")
 
@@ -43,11 +44,15 @@ def build_estimator(cls: type[Estimator], plant_attr: Callable[[str], Any],
     (:class:`~fir_gym.wrappers.VectorEstimatorObservation`) differ only in
     ``plant_attr``.
     """
+    check_options(cls, options, label=registry_name(cls))
     attribute = cls.model_attribute
     model = plant_attr(attribute)
     if model is None:
-        raise ValueError(f"the plant has no `{attribute}`: {cls.__name__} needs the plant's "
-                         f"model (env.unwrapped.{attribute})")
+        other = ("a discrete-time estimator such as 'ekf'" if attribute == "continuous_model"
+                 else "an estimator of its model")
+        raise IncompatibleModelError(
+            f"the plant has no `{attribute}`: {cls.__name__} needs the plant's model "
+            f"(env.unwrapped.{attribute}); use {other}")
     options = dict(options)
     accepts = inspect.signature(cls.__init__).parameters
     horizon = plant_attr("default_horizon")
@@ -142,14 +147,19 @@ def prior_of(x0: Any, P0: Any) -> tuple[NDArray[np.float64] | None, NDArray[np.f
     return x0, np.asarray(P0, dtype=np.float64) + PRIOR_FLOOR * np.diag(np.maximum(1.0, x0**2))
 
 
+def registry_name(cls: type[Estimator]) -> str | None:
+    """The name ``cls`` is registered under (``"ekf"``), else ``None``."""
+    for name in estimator_names():
+        if estimator_class(name) is cls:
+            return name
+    return None
+
+
 def estimator_label(estimator: Estimator) -> str:
     """How frames and legends name ``estimator``: its registry name in capitals (``"EKF"``),
     else its class name."""
-    cls = type(estimator)
-    for name in estimator_names():
-        if estimator_class(name) is cls:
-            return name.upper()
-    return cls.__name__
+    name = registry_name(type(estimator))
+    return name.upper() if name else type(estimator).__name__
 
 
 def default_prior(env: gym.Env) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:

@@ -16,8 +16,8 @@ from typing import Any
 import gymnasium as gym
 from gymnasium.envs.registration import load_env_creator
 
-from .baselines import MeasurementObservation, TrueStateObservation
-from .estimator_observation import EstimatorObservation
+# The wrappers (and so the estimators and numba) are imported when an env is built, not
+# when ``import fir_gym`` registers the ids with this module's entry points.
 
 
 def wrap_observation(env: gym.Env, kind: str, *, observation: str = "estimate",
@@ -29,6 +29,9 @@ def wrap_observation(env: gym.Env, kind: str, *, observation: str = "estimate",
     which case ``observation`` and ``estimator_options`` go to
     :class:`EstimatorObservation`.
     """
+    from .baselines import MeasurementObservation, TrueStateObservation
+    from .estimator_observation import EstimatorObservation
+
     if kind == "true":
         return TrueStateObservation(env)
     if kind == "measurement":
@@ -51,6 +54,9 @@ def make_plant(
     plant is wrapped in :class:`EstimatorObservation` with ``observation`` (default
     ``"estimate"``) and ``estimator_kwargs``.
     """
+    from .baselines import TrueStateObservation
+    from .estimator_observation import EstimatorObservation
+
     creator = load_env_creator(plant) if isinstance(plant, str) else plant
     env = creator(**plant_kwargs)
     if not isinstance(env, gym.Env):

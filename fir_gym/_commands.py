@@ -1,0 +1,249 @@
+"""What each ``fir-gym`` subcommand does (the parser and the error handling: :mod:`.cli`).
+
+Every heavy import (Gymnasium's plants, the estimators and numba, stable-baselines3 and
+PyTorch, Dask, imageio) happens inside the command that needs it, so ``fir-gym --help``
+and every subcommand's ``--help`` load none of them. A command reports a user mistake
+by raising (``ValueError``, ``TypeError``, a missing extra's ``ModuleNotFoundError``);
+:func:`fir_gym.cli.main` turns it into one line and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from .tables import format_table
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    from . import ENV_IDS
+    from .estimators import estimator_names
+
+    rows = []
+    for env_id in ENV_IDS:
+        plant: Any = gym.make(env_id).unwrapped
+        rows.append([env_id, gym.spec(env_id).max_episode_steps, ", ".join(plant.state_names),
+                     ", ".join(plant.measurement_names), ", ".join(plant.action_names)])
+    print(format_table(["environment", "max steps", "state", "measurement", "action"], rows))
+    print()
+    print("estimators:", ", ".join(estimator_names()) or "(none registered)")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from .scenarios import SCENARIOS, episodes
+    from .scenarios.plan import execute
+    from .scenarios.report import vocabulary, write_report
+    from .scenarios.runner import Runner
+
+    out = Path(args.out) if args.out else None
+    papers = [p for group in (args.paper or []) for p in group]
+    wanted = [name for name in SCENARIOS
+              if not papers or name.removeprefix("paper") in papers]
+    # the runner first: a missing extra (--backend dask) fails before any work is done
+    with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
+                progress=not args.no_progress) as runner:
+        if out:
+            out.mkdir(parents=True, exist_ok=True)
+        modules = [importlib.import_module(f"fir_gym.scenarios.{name}") for name in wanted]
+        plans = [episodes.plan(seed=args.seed)] + [
+            m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
+        # every scenario's tasks in one map per stage: the workers stay busy across scenarios
+        summaries, *reports = execute(plans, runner, desc="reproduce")
+    headers, rows = episodes.summary_rows(summaries)
+    print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
+    print(f"Scripted episodes (one per environment, seed {args.seed})\n")
+    print(format_table(headers, rows, markdown=args.markdown))
+    for module, report in zip(modules, reports, strict=True):
+        if out and hasattr(module, "plot"):
+            module.plot(report, out)
+        print("\n" + report.to_text(markdown=args.markdown))
+    if out:
+        path = write_report(out, reports, episodes_table=(headers, rows))
+        print(f"\nwrote {path}")
+    return 0
+
+
+def cmd_speed(argv: list[str]) -> int:
+    """``fir-gym speed ...`` (and its old name ``fir-gym bench ...``): every option goes to
+    :func:`fir_gym.benchmarks.speed.main`, which has its own parser."""
+    from .benchmarks import speed_parser
+
+    speed_parser().parse_args(argv)          # --help and mistakes before the heavy imports
+    from .benchmarks import speed
+
+    return int(speed.main(argv) or 0)
+
+
+@contextmanager
+def working(label: str, *, enabled: bool = True) -> Iterator[None]:
+    """``label`` and the seconds elapsed on stderr while the block runs (one line, redrawn
+    each second on a terminal; printed once otherwise), for work that reports no progress
+    of its own."""
+    if not enabled:
+        yield
+        return
+    start, done = time.monotonic(), threading.Event()
+    tty = sys.stderr.isatty()
+
+    def tick() -> None:
+        while not done.wait(1.0):
+            print(f"\r{label} … {time.monotonic() - start:.0f} s", end="", file=sys.stderr,
+                  flush=True)
+
+    if tty:
+        thread = threading.Thread(target=tick, daemon=True)
+        thread.start()
+    else:
+        print(f"{label} …", file=sys.stderr, flush=True)
+    try:
+        yield
+    finally:
+        done.set()
+        if tty:
+            thread.join()
+            print(f"\r{label}: {time.monotonic() - start:.0f} s", file=sys.stderr, flush=True)
+
+
+def check_estimator_options(kind_kwargs: dict[str, Any]) -> None:
+    """The estimator kinds' options checked at the estimator boundary, before any work:
+    an option the filter does not take is named with the ones it accepts and a hint
+    (``nominal=`` for noise, the near miss), as ``gym.make`` would say it."""
+    from .estimators import estimator_class, estimator_names
+    from .estimators.errors import check_options
+
+    names = estimator_names()
+    for kind, options in kind_kwargs.items():
+        if not isinstance(options, dict):
+            continue                      # the kinds' own check names the format
+        if kind in names:
+            check_options(estimator_class(kind), options, label=kind)
+        elif kind == "lqg" and options.get("estimator", "ekf") in names:
+            name = options.get("estimator", "ekf")
+            check_options(estimator_class(name), [k for k in options if k != "estimator"],
+                          label=f"lqg's estimator {name}")
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    check_estimator_options(args.kind_kwargs)
+    from .training import RunConfig, evaluate, kind_options, train
+    from .training.compare import validate
+
+    options = kind_options(args.kind_kwargs, [args.estimator])[args.estimator]
+    config = RunConfig(env_id=args.env, observation_kind=args.estimator, algo=args.algo,
+                       steps=args.steps, seed=args.seed, n_envs=args.n_envs,
+                       observation=args.observation, kind_kwargs=options,
+                       env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs,
+                       eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
+                       tensorboard=args.tensorboard, hyperparams=args.hyperparams)
+    validate([config])
+    out = train(config, args.out, progress_bar=not args.no_progress, resume=args.resume)
+    source = out if config.observation_kind not in ("lqg", "pid") else config
+    with working(f"evaluating {args.episodes} episodes", enabled=not args.no_progress):
+        result = evaluate(source, episodes=args.episodes)
+    print(f"{args.env} observing {args.estimator}: return {result.mean:.4g} ± {result.std:.3g} "
+          f"over {args.episodes} episodes; saved in {out}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.model:
+        if args.kind or args.env:
+            raise ValueError("give --model (a run folder) or --env with --kind, not both")
+        if not Path(args.model, "run.json").is_file():
+            what = "does not exist" if not Path(args.model).exists() else "has no run.json"
+            raise ValueError(f"--model {args.model} is not a run folder of `fir-gym train` "
+                             f"(it {what})")
+    elif not (args.kind and args.env):
+        raise ValueError("give --model (a run folder) or --env and --kind "
+                         "(lqg or pid: nothing to train)")
+    elif args.kind not in ("lqg", "pid"):
+        raise ValueError(f"--kind {args.kind} is learned: train it, then evaluate "
+                         "its folder with --model")
+    check_estimator_options(args.kind_kwargs)
+    from .training import RunConfig, evaluate, kind_options
+
+    if args.model:
+        source: Any = args.model
+    else:
+        options = kind_options(args.kind_kwargs, [args.kind])[args.kind]
+        source = RunConfig(env_id=args.env, observation_kind=args.kind,
+                           kind_kwargs=options, env_kwargs=args.env_kwargs)
+    with working(f"evaluating {args.episodes} episodes", enabled=not args.no_progress):
+        result = evaluate(source, episodes=args.episodes, seed=args.seed,
+                          **({"best": args.best} if args.model else {}))
+    line = f"return {result.mean:.4g} ± {result.std:.3g} over {args.episodes} episodes"
+    if result.rmse is not None:
+        line += "; estimation RMSE " + ", ".join(f"{v:.3g}" for v in result.rmse)
+    if result.anees is not None:
+        line += f"; ANEES {result.anees:.3g}"
+    print(line)
+    return 0
+
+
+def _runner(args: argparse.Namespace) -> Any:
+    from .scenarios.runner import Runner
+
+    return Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
+                  progress=not args.no_progress)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from .training import compare_controllers, plot_learning_curves
+
+    kinds = [k.strip() for k in args.observations.split(",") if k.strip()]
+    seeds = list(range(args.seeds))
+    check_estimator_options(args.kind_kwargs)
+    with _runner(args) as runner:
+        summary = compare_controllers(
+            args.env, kinds, seeds, args.out, steps=args.steps, algo=args.algo,
+            episodes=args.episodes, kind_kwargs=args.kind_kwargs,
+            env_kwargs=args.env_kwargs, algo_kwargs=args.algo_kwargs, n_envs=args.n_envs,
+            observation=args.observation, eval_freq=args.eval_freq,
+            checkpoint_freq=args.checkpoint_freq, tensorboard=args.tensorboard,
+            resume=args.resume, runner=runner)
+    headers = ["observation", "mean return", "std over seeds", "IQM [95% CI]", "per seed",
+               "estimation RMSE", "ANEES"]
+    rows = [[s["observation"], s["mean"], s["std"],
+             f"{s['iqm']:.4g} [{s['iqm_low']:.4g}, {s['iqm_high']:.4g}]",
+             " ".join(f"{r:.4g}" for r in s["per_seed"]),
+             "—" if s["rmse"] is None else ", ".join(f"{v:.3g}" for v in s["rmse"]),
+             "—" if s["anees"] is None else f"{s['anees']:.3g}"] for s in summary]
+    print(format_table(headers, rows))
+    Path(args.out, "comparison.md").write_text(format_table(headers, rows, markdown=True) + "\n")
+    runs = {k: [Path(args.out, f"{k}-seed{s}") for s in seeds] for k in kinds}
+    plot = plot_learning_curves(runs, Path(args.out, "learning_curves.png"), title=args.env)
+    print(f"wrote {Path(args.out, 'comparison.md')}" + (f" and {plot}" if plot else ""))
+    return 0
+
+
+def cmd_benchmark(args: argparse.Namespace) -> int:
+    from .training.benchmark import print_report, run_benchmark
+
+    plants = [p.strip() for p in args.plants.split(",")] if args.plants else None
+    with _runner(args) as runner:
+        report = run_benchmark(args.out, quick=args.quick, runner=runner,
+                               seeds=args.seeds, plants=plants)
+    print_report(report)
+    print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
+    return 0
+
+
+def cmd_watch(args: argparse.Namespace) -> int:
+    from .video import watch
+
+    rec = watch(args.env, args.out, estimator=args.estimator, policy=args.policy,
+                steps=args.steps, seed=args.seed, fps=args.fps, every=args.every,
+                estimator_kwargs=args.estimator_kwargs, env_kwargs=args.env_kwargs)
+    print(f"wrote {rec.path}: {rec.frames} frames at {rec.fps:g} fps, {rec.steps} steps, "
+          f"return {rec.episode_return:.4g}")
+    return 0
