@@ -19,6 +19,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._kalman_linalg import logdet_of_inverse
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
@@ -76,6 +77,7 @@ class ExtendedKalmanFilter(Estimator):
 
     name = "ekf"
     has_compiled_step = True
+    reports_likelihood = True
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
@@ -103,18 +105,21 @@ class ExtendedKalmanFilter(Estimator):
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        e = y - self._h(x)
-        x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
-        return x, P, nis
+                ) -> tuple[FloatArray, ...]:
+        return self._correct(x, P, y, valid)
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray) -> tuple[FloatArray, ...]:
         x, F = self._linearize(x, u)
         P = predict_covariance(P, F, self._GQGt)
+        return self._correct(x, P, y, valid)
+
+    def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
+                 ) -> tuple[FloatArray, ...]:
+        """The Joseph-form update of the prior ``(x, P)``: ``(x⁺, P⁺, nis, log det S)``."""
         e = y - self._h(x)
-        x, P, _, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
-        return x, P, nis
+        x, P, W, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
+        return x, P, nis, logdet_of_inverse(W, x.shape[0])
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
@@ -146,7 +151,7 @@ class ExtendedKalmanFilter(Estimator):
         compiled_kalman.predict_update(
             self._x, self._P, xp, F if F.ndim == 3 else F[None], self._GQGt, y, hx,
             H if H.ndim == 3 else H[None], self._R_batch, valid, self._predicting(),
-            self._diverged, self._nis_run, self._nis, self._limits)
+            self._diverged, self._nis_run, self._nis, self._limits, self._logdet)
 
 
 

@@ -24,7 +24,15 @@ from typing import Any, NamedTuple, Protocol, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
+from ._kalman_linalg import (
+    constant_or_batch,
+    eye,
+    logdet_of_inverse,
+    mul_t,
+    rmul,
+    spd_inverse,
+    symmetrize,
+)
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
@@ -245,6 +253,7 @@ class KalmanFilter(Estimator):
 
     name = "kf"
     has_compiled_step = True
+    reports_likelihood = True
     twin_replaces = (*Estimator.twin_replaces, "_correct", "_matrices")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
@@ -287,11 +296,13 @@ class KalmanFilter(Estimator):
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return self._correct(x, P, y, valid, self._matrices(0))[:3]
+                ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        x, P, nis, _, W = self._correct(x, P, y, valid, self._matrices(self._k))
+        return x, P, nis, logdet_of_inverse(W, x.shape[0])
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         A, B, _, Qd, _ = self._matrices(self._k - 1)
         x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
         every = valid is self._all_valid and not self._restarting
@@ -300,7 +311,7 @@ class KalmanFilter(Estimator):
             K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
             x, nis = correct(x, y - x @ self._mats.C.T, K, W)
             gains.regime[0] = int(bool(np.isfinite(x).all()))
-            return x, P, nis
+            return x, P, nis, logdet_of_inverse(W, x.shape[0])
         gains.regime[0] = 0
         mats = self._matrices(self._k)
         x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
@@ -310,19 +321,19 @@ class KalmanFilter(Estimator):
             gains.regime[0] = 1
             gains.K = np.ascontiguousarray(K.transpose(1, 2, 0))
             gains.W = np.ascontiguousarray(W.transpose(1, 2, 0))
-        return x_new, P_new, nis
+        return x_new, P_new, nis, logdet_of_inverse(W, x.shape[0])
 
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
                  mats: StepMatrices) -> tuple[Any, ...]:
         """The update ``(x⁺, P⁺, nis, K, S⁻¹)``; a shared ``P`` is split where some system has
-        no usable measurement (``K`` and ``S⁻¹`` are then not returned)."""
+        no usable measurement (``K`` is then not returned)."""
         C, R = mats.C, mats.R
         e = y - x @ C.T
         if valid is not self._all_valid:
             if P.shape[0] != x.shape[0]:
                 P = np.repeat(P, x.shape[0], axis=0)
-            x_new, P_new, _, nis = update_kernel(x, P, e, C, R, valid)
-            return x_new, P_new, nis, None, None
+            x_new, P_new, W, nis = update_kernel(x, P, e, C, R, valid)
+            return x_new, P_new, nis, None, W
         K, W, P_new = gain_kernel(P, C, R)
         x_new, nis = correct(x, e, K, W)
         return x_new, P_new, nis, K, W
@@ -368,7 +379,7 @@ class LinearGains:
         compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
                                     prediction.Qd, update.R, y, valid, flt._predicting(),
                                     self.K, self.W, self.regime, flt._diverged, flt._nis_run,
-                                    flt._nis, flt._limits)
+                                    flt._nis, flt._limits, flt._logdet)
 
 
 class _Scheduled(Protocol):

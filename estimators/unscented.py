@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
+from ._kalman_linalg import cholesky, logdet_of_inverse, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
@@ -261,6 +261,7 @@ class UnscentedKalmanFilter(Estimator):
 
     name = "ukf"
     has_compiled_step = True
+    reports_likelihood = True
     twin_replaces = (*Estimator.twin_replaces, "_draw", "_correct")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
@@ -294,11 +295,11 @@ class UnscentedKalmanFilter(Estimator):
         return self.points.points(x, matrix_sqrt(P, self.jitter))
 
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                ) -> tuple[FloatArray, ...]:
         return self._correct(x, P, self._draw(x, P), y, valid)
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray) -> tuple[FloatArray, ...]:
         n_b, n = x.shape
         N = self.points.num_points
         X = self._draw(x, P)
@@ -310,7 +311,7 @@ class UnscentedKalmanFilter(Estimator):
         return self._correct(x_pred, P_pred, X_pred, y, valid)
 
     def _correct(self, x: FloatArray, P: FloatArray, X: FloatArray, y: FloatArray,
-                 valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                 valid: np.ndarray) -> tuple[FloatArray, ...]:
         n_b, N, n = X.shape
         sp = self.points
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
@@ -329,7 +330,7 @@ class UnscentedKalmanFilter(Estimator):
             x_new = np.where(valid[:, None], x_new, x)
             P_new = np.where(valid[:, None, None], P_new, P)
             nis = np.where(valid, nis, np.nan)
-        return x_new, P_new, nis
+        return x_new, P_new, nis, logdet_of_inverse(W, n_b)
 
 
     # ------------------------------------------------------------------ compiled twin
@@ -362,7 +363,7 @@ class UnscentedKalmanFilter(Estimator):
             Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
         compiled_unscented.update(x, P, X, Z, y, sp.Wm, sp.Wc, self._R, valid, self._x,
                                   self._P, self._diverged, self._nis_run, self._nis,
-                                  self._limits)
+                                  self._limits, self._logdet)
 
 
 register_estimator("ukf", UnscentedKalmanFilter)
