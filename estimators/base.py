@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike
 from . import compiled
 from ._validation import FloatArray, as_batch, as_covariance, one_of, positive, real_array
 from .model import StateSpaceModel
+from .sequences import FilterResult, filter_sequence
 
 NAN_POLICIES = ("raise", "skip")
 
@@ -260,6 +261,29 @@ class Estimator(ABC):
         self._predicted = False
         x = self._x
         return x[0].copy() if self._single else x.copy()
+
+    def filter(self, ys: ArrayLike, us: ArrayLike | None = None) -> FilterResult:
+        """Run the filter over a whole sequence: ``step(ys[k], us[k-1])`` for every ``k``.
+
+        Args:
+            ys: measurements ``(T, n_y)``, or ``(T, B, n_y)`` for a batch (``(T,)`` when
+                ``n_y = 1``); ``ys[0]`` is the first (the one ``env.reset`` returns). NaN and
+                masked (``numpy.ma``) entries are missing measurements.
+            us: inputs ``(T − 1, n_u)`` or ``(T − 1, B, n_u)`` (``T`` rows accepted, the
+                last unused): ``us[k]`` is the input applied between ``ys[k]`` and
+                ``ys[k+1]``, as in an env loop. ``None``: no input.
+
+        Returns:
+            A :class:`~fir_gym.estimators.sequences.FilterResult` (estimates, covariances,
+            log-likelihoods, NIS and divergence flags per step). The filter continues from
+            its current state and ends where the sequence ends: call :meth:`reset` first
+            for a fresh run. The loop is :meth:`step` itself (compiled or numpy path alike),
+            so the result equals a step-by-step run exactly.
+
+        Raises:
+            ValueError: naming ``ys`` or ``us`` on a wrong shape or length.
+        """
+        return filter_sequence(self, ys, us)
 
     @property
     def x(self) -> FloatArray:
@@ -479,6 +503,8 @@ class Estimator(ABC):
         data = np.array(real_array("y", np.ma.getdata(y)), dtype=np.float64)
         data[mask] = 0.0
         Y, valid = self._measurement(data)
+        if not mask.any():
+            return Y, valid
         missing = mask.reshape(Y.shape).any(axis=1)
         return Y, valid & ~missing
 

@@ -1,0 +1,199 @@
+"""Whole sequences (``Estimator.filter``) and the innovations' log-likelihood.
+
+Oracles: pykalman's robot data set (its shipped reference filtered means and covariances,
+the log-likelihood of its EM run's first iteration, and pykalman's own ``loglikelihood``),
+an independent brute-force Gaussian density of the stacked measurements, and the filter's
+own ``step`` loop (the sequence API must equal it bit for bit).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.stats
+from compiled_paths import needs_twins, numpy_path
+
+from fir_gym.estimators import (
+    ExtendedFIRFilter,
+    ExtendedKalmanFilter,
+    FIRFilter,
+    KalmanFilter,
+    LinearizedKalmanFilter,
+    LinearModel,
+    RecursiveFIRFilter,
+    UFIRFilter,
+    UnscentedKalmanFilter,
+)
+
+pykalman = pytest.importorskip("pykalman")
+from pykalman.datasets import load_robot  # noqa: E402
+
+KALMAN = [KalmanFilter, ExtendedKalmanFilter, LinearizedKalmanFilter, UnscentedKalmanFilter]
+FIR = [FIRFilter, UFIRFilter, RecursiveFIRFilter, ExtendedFIRFilter]
+
+
+def robot(initial: bool = False) -> tuple[LinearModel, dict, np.ma.MaskedArray, np.ndarray]:
+    """pykalman's robot: its offsets become an input ``B = I``, ``u[k] = offset[k]``, and the
+    observation offset is subtracted from the (masked) observations."""
+    d = load_robot()
+    pre = "initial_" if initial else ""
+    model = LinearModel(A=d["transition_matrix"], C=d["observation_matrix"],
+                        Q=d[pre + "transition_covariance"], R=d[pre + "observation_covariance"],
+                        B=np.eye(5))
+    return model, d, d["observations"] - d["observation_offset"], d["transition_offsets"]
+
+
+@pytest.mark.parametrize("cls", KALMAN)
+def test_filter_equals_pykalmans_reference_means_covariances_and_loglikelihood(cls):
+    model, d, ys, us = robot()
+    assert np.ma.count_masked(ys) > 0                  # the data set has missing entries
+    for path in ("compiled", "numpy"):
+        flt = cls(model, x0=d["initial_state_mean"], P0=d["initial_state_covariance"])
+        if path == "numpy":
+            with numpy_path():
+                res = flt.filter(ys, us)
+        else:
+            res = flt.filter(ys, us)
+        tol = 1e-6 if cls is UnscentedKalmanFilter else 1e-9      # the UT's round-off
+        np.testing.assert_allclose(res.x, d["filtered_state_means"], rtol=tol, atol=tol)
+        np.testing.assert_allclose(res.P, d["filtered_state_covariances"], rtol=tol, atol=tol)
+        pk = pykalman.KalmanFilter(
+            transition_matrices=d["transition_matrix"], observation_matrices=d["observation_matrix"],
+            transition_covariance=d["transition_covariance"],
+            observation_covariance=d["observation_covariance"],
+            transition_offsets=d["transition_offsets"], observation_offsets=d["observation_offset"],
+            initial_state_mean=d["initial_state_mean"],
+            initial_state_covariance=d["initial_state_covariance"])
+        assert res.log_likelihood == pytest.approx(pk.loglikelihood(d["observations"]),
+                                                   rel=1e-12 if tol < 1e-6 else 1e-10)
+        assert res.log_likelihoods.shape == (501,) and res.nis.shape == (501,)
+        masked = np.ma.getmaskarray(ys).any(axis=1)
+        assert (res.log_likelihoods[masked] == 0).all() and np.isnan(res.nis[masked]).all()
+        assert not res.diverged.any()
+
+
+def test_loglikelihood_equals_the_data_sets_first_em_iteration():
+    """The robot data set ships the log-likelihood of each EM iteration; the first is that of
+    the initial covariances."""
+    model, d, ys, us = robot(initial=True)
+    kf = KalmanFilter(model, x0=d["initial_state_mean"], P0=d["initial_state_covariance"])
+    assert kf.filter(ys, us).log_likelihood == pytest.approx(d["loglikelihoods"][0], rel=1e-12)
+
+
+def test_loglikelihood_equals_the_joint_gaussian_density_of_the_measurements():
+    """Brute force: ``y[0..T-1]`` of a linear-Gaussian model is one Gaussian vector (mean and
+    covariance from the model's moments); its log-density is the sum of the innovations'."""
+    rng = np.random.default_rng(3)
+    A = np.array([[1.0, 0.2], [0.0, 0.9]])
+    C = np.array([[1.0, 0.0], [0.5, 1.0]])
+    Q, R = np.diag([0.05, 0.1]), np.array([[0.3, 0.1], [0.1, 0.2]])
+    x0, P0 = np.array([0.5, -1.0]), np.diag([2.0, 1.0])
+    T, n, m = 6, 2, 2
+    means, covs = [x0], [P0]                       # moments of x[k]
+    for _ in range(T - 1):
+        means.append(A @ means[-1])
+        covs.append(A @ covs[-1] @ A.T + Q)
+    Phi = lambda k, j: np.linalg.matrix_power(A, k - j)   # noqa: E731  x[k] = Φ x[j] + ...
+    big = np.zeros((T * m, T * m))
+    for k in range(T):
+        for j in range(T):
+            lo = min(k, j)
+            cross = Phi(k, lo) @ covs[lo] @ Phi(j, lo).T  # Cov(x[k], x[j])
+            big[k * m:(k + 1) * m, j * m:(j + 1) * m] = C @ cross @ C.T + (R if k == j else 0)
+    ys = rng.normal(size=(T, m))
+    want = scipy.stats.multivariate_normal(np.concatenate([C @ mu for mu in means]),
+                                           big).logpdf(ys.ravel())
+    for cls in KALMAN:
+        flt = cls(LinearModel(A=A, C=C, Q=Q, R=R), x0=x0, P0=P0)
+        assert flt.filter(ys).log_likelihood == pytest.approx(want, rel=1e-9), cls.__name__
+
+
+def tracking(T: int = 80, B: int = 3, seed: int = 0
+             ) -> tuple[LinearModel, np.ndarray, np.ndarray]:
+    """A constant-velocity target with a commanded acceleration, position measured: ``B``
+    independent runs ``(T, B, 1)`` and their inputs ``(T - 1, B, 1)``."""
+    dt = 0.1
+    model = LinearModel(A=[[1, dt], [0, 1]], C=[[1.0, 0.0]], B=[[0.5 * dt**2], [dt]],
+                        G=[[0.5 * dt**2], [dt]], Q=0.5, R=0.04, dt=dt)
+    rng = np.random.default_rng(seed)
+    U = rng.normal(size=(T - 1, B, 1))
+    x = np.zeros((B, 2))
+    ys = []
+    for k in range(T):
+        ys.append(x @ model.C.T + 0.2 * rng.normal(size=(B, 1)))
+        if k < T - 1:
+            x = x @ model.A.T + U[k] @ model.B.T + rng.normal(size=(B, 1)) @ model.G.T * 0.7
+    return model, np.stack(ys), U
+
+
+@pytest.mark.parametrize("cls", KALMAN + FIR)
+def test_filter_equals_the_step_loop_batched_equals_looped(cls):
+    model, Y, U = tracking()
+    kw = {"horizon": 12} if cls in FIR else {}
+    Y[5, 1] = np.nan                                    # one system misses one measurement
+    batch = cls(model, **kw).filter(Y, U)
+    assert batch.x.shape == (80, 3, 2)
+    for b in range(3):
+        one = cls(model, **kw)
+        res = one.filter(Y[:, b], U[:, b])
+        np.testing.assert_allclose(batch.x[:, b], res.x, rtol=1e-12, atol=1e-12)
+        if res.P is not None:
+            np.testing.assert_allclose(batch.P[:, b], res.P, rtol=1e-11, atol=1e-12)
+        if res.log_likelihoods is not None:
+            np.testing.assert_allclose(batch.log_likelihoods[:, b], res.log_likelihoods,
+                                       rtol=1e-11)
+            assert batch.log_likelihood[b] == pytest.approx(res.log_likelihood, rel=1e-11)
+        loop = cls(model, **kw)                          # the env loop, by hand
+        for k in range(80):
+            y = Y[k, b] if np.isfinite(Y[k, b]).all() else None
+            np.testing.assert_array_equal(loop.step(y, None if k == 0 else U[k - 1, b]),
+                                          res.x[k])
+    if cls in KALMAN:
+        assert batch.log_likelihoods[5, 1] == 0 and batch.log_likelihoods[5, 0] != 0
+
+
+@needs_twins
+@pytest.mark.parametrize("cls", KALMAN + FIR)
+def test_filter_on_the_compiled_path_equals_the_numpy_path(cls):
+    """The UKF with ``alpha = 1`` as in test_compiled (the default 1e-3 weighs the sums'
+    round-off by ``1/alpha²``)."""
+    model, d, ys, us = robot()
+    kw = {"horizon": 12} if cls in FIR else {"alpha": 1.0} if cls is UnscentedKalmanFilter else {}
+    fast = cls(model, **kw).filter(ys, us)
+    with numpy_path():
+        slow = cls(model, **kw).filter(ys, us)
+    np.testing.assert_allclose(fast.x, slow.x, rtol=1e-8, atol=1e-8)
+    if fast.log_likelihoods is not None:
+        np.testing.assert_allclose(fast.log_likelihoods, slow.log_likelihoods, rtol=1e-9)
+
+
+def test_nan_and_masked_and_none_are_the_same_missing_measurement():
+    model, d, ys, us = robot()
+    with_nan = KalmanFilter(model).filter(ys.filled(np.nan), us)       # nan_policy='raise'
+    with_mask = KalmanFilter(model).filter(ys, us)
+    np.testing.assert_array_equal(with_nan.x, with_mask.x)
+    kf = KalmanFilter(model)
+    for k in range(len(ys)):
+        y = None if np.ma.getmaskarray(ys[k]).any() else ys.data[k]
+        x = kf.step(y, None if k == 0 else us[k - 1])
+    np.testing.assert_array_equal(x, with_mask.x[-1])
+
+
+def test_bad_sequences_name_the_argument():
+    model, d, ys, us = robot()
+    kf = KalmanFilter(model)
+    with pytest.raises(ValueError, match="ys must have shape"):
+        kf.filter(np.zeros((10, 3)))
+    with pytest.raises(ValueError, match="ys must have shape"):
+        kf.filter(np.zeros((0, 2)))
+    with pytest.raises(ValueError, match="us must have T - 1 = 9 or T = 10 rows"):
+        kf.filter(np.zeros((10, 2)), np.zeros((5, 5)))
+    with pytest.raises(ValueError, match="us must have shape"):
+        kf.filter(np.zeros((10, 2)), np.zeros((9, 4)))
+    with pytest.raises(ValueError, match="us must have shape"):
+        kf.filter(np.zeros((10, 3, 2)), np.zeros((9, 2, 5)))
+    with pytest.raises(TypeError, match="ys"):
+        kf.filter(np.array([["a", "b"]]))
+    kf.filter(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="reset"):
+        kf.filter(np.zeros((3, 4, 2)))
