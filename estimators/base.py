@@ -246,7 +246,7 @@ class Estimator(ABC):
         """
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
-        self._last_valid = valid
+        self._last_valid: np.ndarray = valid
         if compiled.ENABLED and self.has_compiled_step:
             if self._update_next:
                 self._compiled_update(Y, valid)
@@ -364,8 +364,7 @@ class Estimator(ABC):
         return {}
 
     def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
-                        valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                        valid: np.ndarray) -> StepResult:
         """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
 
         The default calls :meth:`_update` on the sub-batch, which is right for filters
@@ -376,13 +375,12 @@ class Estimator(ABC):
 
     @abstractmethod
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                ) -> StepResult:
         """First step: measurement update of the prior with ``y[0]`` (numpy reference)."""
 
     @abstractmethod
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                        valid: np.ndarray) -> StepResult:
         """Later steps: predict with ``u[k-1]``, then update with ``y[k]`` (numpy reference)."""
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:

@@ -58,7 +58,8 @@ def test_filter_equals_pykalmans_reference_means_covariances_and_loglikelihood(c
         np.testing.assert_allclose(res.x, d["filtered_state_means"], rtol=tol, atol=tol)
         np.testing.assert_allclose(res.P, d["filtered_state_covariances"], rtol=tol, atol=tol)
         pk = pykalman.KalmanFilter(
-            transition_matrices=d["transition_matrix"], observation_matrices=d["observation_matrix"],
+            transition_matrices=d["transition_matrix"],
+            observation_matrices=d["observation_matrix"],
             transition_covariance=d["transition_covariance"],
             observation_covariance=d["observation_covariance"],
             transition_offsets=d["transition_offsets"], observation_offsets=d["observation_offset"],
@@ -88,7 +89,7 @@ def test_loglikelihood_equals_the_joint_gaussian_density_of_the_measurements():
     C = np.array([[1.0, 0.0], [0.5, 1.0]])
     Q, R = np.diag([0.05, 0.1]), np.array([[0.3, 0.1], [0.1, 0.2]])
     x0, P0 = np.array([0.5, -1.0]), np.diag([2.0, 1.0])
-    T, n, m = 6, 2, 2
+    T, m = 6, 2
     means, covs = [x0], [P0]                       # moments of x[k]
     for _ in range(T - 1):
         means.append(A @ means[-1])
@@ -157,7 +158,7 @@ def test_filter_equals_the_step_loop_batched_equals_looped(cls):
 def test_filter_on_the_compiled_path_equals_the_numpy_path(cls):
     """The UKF with ``alpha = 1`` as in test_compiled (the default 1e-3 weighs the sums'
     round-off by ``1/alpha²``)."""
-    model, d, ys, us = robot()
+    model, _d, ys, us = robot()
     kw = {"horizon": 12} if cls in FIR else {"alpha": 1.0} if cls is UnscentedKalmanFilter else {}
     fast = cls(model, **kw).filter(ys, us)
     with numpy_path():
@@ -168,7 +169,7 @@ def test_filter_on_the_compiled_path_equals_the_numpy_path(cls):
 
 
 def test_nan_and_masked_and_none_are_the_same_missing_measurement():
-    model, d, ys, us = robot()
+    model, _d, ys, us = robot()
     with_nan = KalmanFilter(model).filter(ys.filled(np.nan), us)       # nan_policy='raise'
     with_mask = KalmanFilter(model).filter(ys, us)
     np.testing.assert_array_equal(with_nan.x, with_mask.x)
@@ -180,7 +181,7 @@ def test_nan_and_masked_and_none_are_the_same_missing_measurement():
 
 
 def test_bad_sequences_name_the_argument():
-    model, d, ys, us = robot()
+    model, _d, _ys, _us = robot()
     kf = KalmanFilter(model)
     with pytest.raises(ValueError, match="ys must have shape"):
         kf.filter(np.zeros((10, 3)))
