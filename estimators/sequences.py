@@ -131,7 +131,7 @@ def filter_sequence(est: Estimator, ys: ArrayLike, us: ArrayLike | None = None
     lls: list[Any] = []
     nis: list[Any] = []
     div: list[Any] = []
-    gaps = [bool(g) for g in np.ma.getmaskarray(Y).reshape(T, -1).any(axis=1)]
+    gaps = np.isnan(np.ma.filled(Y, np.nan)).reshape(T, -1).any(axis=1)
     for k in range(T):
         y = Y[k] if gaps[k] else Y.data[k]
         u = None if (k == 0 or U is None) else U[k - 1]
