@@ -26,6 +26,8 @@ from .compiled import kalman as compiled_kalman
 from .kalman import LinearGains, StepMatrices, predict_covariance, update_kernel
 from .model import LinearModel, StateSpaceModel
 from .registry import register_estimator
+from .sequences import SmootherResult
+from .smoothers import smooth_sequence
 
 __all__ = ["ExtendedKalmanFilter", "model_callables", "model_linearizer"]
 
@@ -120,6 +122,20 @@ class ExtendedKalmanFilter(Estimator):
         e = y - self._h(x)
         x, P, W, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
         return x, P, nis, logdet_of_inverse(W, x.shape[0])
+
+    # ------------------------------------------------------------------ smoother
+    def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
+        """Extended Rauch–Tung–Striebel smoother (:mod:`.smoothers`): a forward
+        :meth:`filter` (same arguments and alignment), then the backward pass with
+        ``x⁻ = f(x̂, u)`` and ``F = ∂f/∂x`` at each filtered estimate. Returns a
+        :class:`~fir_gym.estimators.sequences.SmootherResult`."""
+        return smooth_sequence(self, ys, us, self._smoother_prediction)
+
+    def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
+                             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        x_pred, F = self._linearize(x, u)
+        F = np.broadcast_to(F, (x.shape[0], *F.shape[-2:]))
+        return x_pred, predict_covariance(P, F, self._GQGt), P @ F.mT
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:

@@ -38,6 +38,8 @@ from .base import Estimator
 from .compiled import kalman as compiled_kalman
 from .model import StateSpaceModel, SystemMatrices
 from .registry import register_estimator
+from .sequences import SmootherResult
+from .smoothers import smooth_sequence
 
 __all__ = ["Innovation", "KalmanFilter", "kf_predict", "kf_update"]
 
@@ -338,9 +340,22 @@ class KalmanFilter(Estimator):
         x_new, nis = correct(x, e, K, W)
         return x_new, P_new, nis, K, W
 
+    # ------------------------------------------------------------------ smoother
+    def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
+        """Rauch–Tung–Striebel smoother over a whole sequence (:mod:`.smoothers`): a
+        forward :meth:`filter` (same arguments and alignment), then the backward pass with
+        ``A, B, G Q Gᵀ`` of ``model.matrices(k)``. Returns a
+        :class:`~fir_gym.estimators.sequences.SmootherResult` (``x``, ``P``, ``filtered``)."""
+        return smooth_sequence(self, ys, us, self._smoother_prediction)
+
+    def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
+                             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        A, B, _, Qd, _ = self._matrices(k)
+        return x @ A.T + u @ B.T, predict_covariance(P, A, Qd), P @ A.T
+
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
-        mats = self._matrices(0)
+        mats = self._matrices(self._k)
         self._gains.step(self, mats, mats, self._no_input, y, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray

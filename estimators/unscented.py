@@ -49,6 +49,8 @@ from .compiled import unscented as compiled_unscented
 from .extended import model_callables
 from .model import StateSpaceModel
 from .registry import register_estimator
+from .sequences import SmootherResult
+from .smoothers import smooth_sequence
 
 __all__ = ["CubatureSigmaPoints", "MerweScaledSigmaPoints", "SigmaPoints",
            "UnscentedKalmanFilter", "matrix_sqrt", "unscented_transform"]
@@ -332,6 +334,27 @@ class UnscentedKalmanFilter(Estimator):
             nis = np.where(valid, nis, np.nan)
         return x_new, P_new, nis, logdet_of_inverse(W, n_b)
 
+
+    # ------------------------------------------------------------------ smoother
+    def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
+        """Unscented Rauch–Tung–Striebel smoother (Särkkä 2008; :mod:`.smoothers`): a forward
+        :meth:`filter` (same arguments and alignment), then the backward pass with the
+        unscented transform of ``f`` at each filtered estimate (this filter's sigma points)
+        and the cross-covariance ``C = Σ Wᶜ (χᵢ − x̂)(f(χᵢ) − x⁻)ᵀ``. Returns a
+        :class:`~fir_gym.estimators.sequences.SmootherResult`."""
+        return smooth_sequence(self, ys, us, self._smoother_prediction)
+
+    def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
+                             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        n_b, n = x.shape
+        sp = self.points
+        N = sp.num_points
+        X = self._draw(x, P)
+        Xf = self._f(X.reshape(n_b * N, n), np.repeat(u, N, axis=0)).reshape(n_b, N, n)
+        x_pred, DF, df, cf = _moments(Xf, sp)
+        _, DX, dx, cx = _moments(X, sp)
+        P_pred = symmetrize(_cross(DF, df, cf, DF, df, cf, sp)) + self._GQGt
+        return x_pred, P_pred, _cross(DX, dx, cx, DF, df, cf, sp)
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
