@@ -108,6 +108,9 @@ class Estimator(ABC):
     #: whether the step computes the Gaussian log-likelihood of its innovation (the
     #: Kalman family; ``log det S`` comes from the step)
     reports_likelihood: ClassVar[bool] = False
+    #: whether ``est.model = new_model`` takes effect (the class rebuilds what it derived from
+    #: the model in :meth:`_model_changed`); otherwise assignment is refused
+    model_reassignable: ClassVar[bool] = False
     #: whether the class has compiled twins of its step (:meth:`_compiled_update`,
     #: :meth:`_compiled_predict_update`)
     has_compiled_step: ClassVar[bool] = False
@@ -135,22 +138,85 @@ class Estimator(ABC):
     ) -> None:
         if not isinstance(model, StateSpaceModel):
             raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
-        one_of("nan_policy", nan_policy, NAN_POLICIES)
         self.model = model
         self._n_y = model.n_y
         self.nan_policy = nan_policy
-        self.max_covariance_trace = positive("max_covariance_trace", max_covariance_trace)
+        max_trace = positive("max_covariance_trace", max_covariance_trace)
         tail = positive("nis_tail", nis_tail)
         if tail >= 1:
             raise ValueError(f"nis_tail must be in (0, 1); got {nis_tail!r}")
-        self.nis_patience = positive("nis_patience", nis_patience, integer=True)
+        patience = positive("nis_patience", nis_patience, integer=True)
         self._nis_threshold = float(scipy.stats.chi2.isf(tail, model.n_y))
-        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`)
-        self._limits = np.array([self._nis_threshold, float(self.nis_patience),
-                                 self.max_covariance_trace])
+        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`); the
+        #: properties ``nis_patience`` and ``max_covariance_trace`` read and write them
+        self._limits = np.array([self._nis_threshold, float(patience), max_trace])
         self.reset(x0, P0)
 
     # ------------------------------------------------------------------ public API
+    @property
+    def model(self) -> StateSpaceModel:
+        """The filter's model. Assigning a new one of the same sizes (``n_x, n_y, n_u``) takes
+        effect at the next step on the Kalman family (``model_reassignable``), the state and
+        covariance kept — e.g. ``kf.model = kf.model.replace(R=2 * kf.model.R)``; the other
+        filters, which precompute gains from their model, refuse it with an error."""
+        return self._filter_model
+
+    @model.setter
+    def model(self, model: StateSpaceModel) -> None:
+        if "_filter_model" not in self.__dict__ or model is self._filter_model:
+            self._filter_model: StateSpaceModel = model    # the constructor's assignment
+            return
+        name = type(self).__name__
+        if not self.model_reassignable:
+            raise AttributeError(f"{name}.model cannot be reassigned: the filter precomputes "
+                                 f"its gains from the model. Build a new {name} from the new "
+                                 f"model instead")
+        if not isinstance(model, StateSpaceModel):
+            raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
+        old = self._filter_model
+        sizes = ("n_x", "n_y", "n_u")
+        if any(getattr(model, a) != getattr(old, a) for a in sizes):
+            raise ValueError(f"model must keep the sizes of {name}'s model "
+                             f"(n_x, n_y, n_u = {tuple(getattr(old, a) for a in sizes)}); "
+                             f"got {tuple(getattr(model, a) for a in sizes)}: build a new filter")
+        self._filter_model = model
+        try:
+            self._model_changed()
+        except Exception:
+            self._filter_model = old
+            self._model_changed()
+            raise
+
+    def _model_changed(self) -> None:  # noqa: B027 (optional hook)
+        """Hook: rebuild what the filter derived from ``self.model`` (a new one was assigned)."""
+
+    @property
+    def max_covariance_trace(self) -> float:
+        """Divergence limit on ``trace(P)`` (assignable)."""
+        return float(self._limits[2])
+
+    @max_covariance_trace.setter
+    def max_covariance_trace(self, value: float) -> None:
+        self._limits[2] = positive("max_covariance_trace", value)
+
+    @property
+    def nis_patience(self) -> int:
+        """Consecutive high-NIS steps that flag divergence (assignable)."""
+        return int(self._limits[1])
+
+    @nis_patience.setter
+    def nis_patience(self, value: int) -> None:
+        self._limits[1] = float(positive("nis_patience", value, integer=True))
+
+    @property
+    def nan_policy(self) -> str:
+        """``"raise"`` or ``"skip"`` for non-finite measurements (assignable)."""
+        return self._nan_policy
+
+    @nan_policy.setter
+    def nan_policy(self, value: str) -> None:
+        self._nan_policy = one_of("nan_policy", value, NAN_POLICIES)
+
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None) -> None:
         """Set the prior of ``x[0]``: mean ``x0`` (default 0) and covariance ``P0`` (default I).
 
@@ -247,6 +313,14 @@ class Estimator(ABC):
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
         self._last_valid: np.ndarray = valid
+        self._dispatch_step(Y, U, valid)
+        self._k += 1
+        self._predicted = False
+        x = self._x
+        return x[0].copy() if self._single else x.copy()
+
+    def _dispatch_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
+        """One step on checked arrays: the compiled twin or the numpy reference."""
         if compiled.ENABLED and self.has_compiled_step:
             if self._update_next:
                 self._compiled_update(Y, valid)
@@ -257,10 +331,6 @@ class Estimator(ABC):
         if self._restarting:
             self._fresh[:] = False
             self._restarting = False
-        self._k += 1
-        self._predicted = False
-        x = self._x
-        return x[0].copy() if self._single else x.copy()
 
     def filter(self, ys: ArrayLike, us: ArrayLike | None = None) -> FilterResult:
         """Run the filter over a whole sequence: ``step(ys[k], us[k-1])`` for every ``k``.

@@ -37,6 +37,7 @@ from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
 from .model import StateSpaceModel, SystemMatrices
+from .public_steps import PublicSteps
 from .registry import register_estimator
 from .sequences import SmootherResult
 from .smoothers import smooth_sequence
@@ -225,7 +226,7 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
 
 
 # ---------------------------------------------------------------------------- filters
-class KalmanFilter(Estimator):
+class KalmanFilter(PublicSteps, Estimator):
     """Linear Kalman filter on a :class:`LinearModel` or :class:`TimeVaryingLinearModel`.
 
     Convention for time-varying models (docs/architecture.md#time-varying-models): the prediction
@@ -256,10 +257,16 @@ class KalmanFilter(Estimator):
     name = "kf"
     has_compiled_step = True
     reports_likelihood = True
+    model_reassignable = True
+    per_call_H = "C"
     twin_replaces = (*Estimator.twin_replaces, "_correct", "_matrices")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
+        self._bind(model)
+        super().__init__(model, x0=x0, P0=P0, **options)
+
+    def _bind(self, model: StateSpaceModel) -> None:
         if not getattr(model, "is_linear", False) or not hasattr(model, "matrices"):
             raise TypeError(f"model must be a LinearModel or TimeVaryingLinearModel for "
                             f"{type(self).__name__}; got {type(model).__name__} "
@@ -267,7 +274,10 @@ class KalmanFilter(Estimator):
         self._constant = bool(getattr(model, "time_invariant", True))
         if self._constant:
             self._mats = self._prepare(model.matrices(0))
-        super().__init__(model, x0=x0, P0=P0, **options)
+
+    def _model_changed(self) -> None:
+        self._bind(self.model)
+        self._gains = LinearGains(self.model.n_x, self.model.n_y, self._constant)
 
     @staticmethod
     def _prepare(mats: Any) -> StepMatrices:

@@ -14,12 +14,13 @@ from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
 from .kalman import predict_kernel, update_kernel
+from .public_steps import PublicSteps
 from .registry import register_estimator
 
 __all__ = ["LinearizedKalmanFilter"]
 
 
-class LinearizedKalmanFilter(Estimator):
+class LinearizedKalmanFilter(PublicSteps, Estimator):
     """Paper 000's linearised Kalman filter (LKF): a KF on the perturbation about a nominal path.
 
     The nominal trajectory starts at the filter's initial state and runs open
@@ -39,6 +40,7 @@ class LinearizedKalmanFilter(Estimator):
     name = "lkf"
     has_compiled_step = True
     reports_likelihood = True
+    model_reassignable = True
 
     _x_nom: FloatArray
 
@@ -47,6 +49,9 @@ class LinearizedKalmanFilter(Estimator):
 
     def _reset_state(self) -> None:
         self._x_nom = np.empty((0, self.model.n_x))
+        self._model_changed()
+
+    def _model_changed(self) -> None:
         self._GQGt = self.model.GQGT
         self._R_batch = self.model.R[None]
 

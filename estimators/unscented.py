@@ -42,12 +42,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._hooked_moments import hooked_cross, hooked_moments
 from ._kalman_linalg import cholesky, logdet_of_inverse, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
 from .extended import model_callables
 from .model import StateSpaceModel
+from .public_steps import PublicSteps
 from .registry import register_estimator
 from .sequences import SmootherResult
 from .smoothers import smooth_sequence
@@ -237,7 +239,7 @@ def unscented_transform(Z: ArrayLike, Wm: ArrayLike | SigmaPoints, Wc: ArrayLike
     return (mean[0], P[0]) if single else (mean, P)
 
 
-class UnscentedKalmanFilter(Estimator):
+class UnscentedKalmanFilter(PublicSteps, Estimator):
     """Unscented Kalman filter for additive noise (paper 003, Table 2, corrected; batched).
 
     predict: ``χ = points(x, P)``, ``x⁻, P⁻ = UT(f(χ, u)) + G Q Gᵀ``;
@@ -264,6 +266,7 @@ class UnscentedKalmanFilter(Estimator):
     name = "ukf"
     has_compiled_step = True
     reports_likelihood = True
+    model_reassignable = True
     twin_replaces = (*Estimator.twin_replaces, "_draw", "_correct")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
@@ -284,9 +287,20 @@ class UnscentedKalmanFilter(Estimator):
             raise ValueError(f"jitter must be a non-negative number; got {jitter!r}")
         self.points, self.redraw, self.jitter = points, bool(redraw), float(jitter)
         super().__init__(model, x0=x0, P0=P0, **options)
+        self._model_changed()
+
+    def _model_changed(self) -> None:
+        model = self.model
+        if getattr(model, "time_invariant", True) is False:
+            raise TypeError(f"model must have time-free f/h for {type(self).__name__}")
         self._f, _, self._h, _ = model_callables(model)
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R = np.ascontiguousarray(model.R)
+        #: the model's residual and mean hooks (all None for a plain model)
+        self._hooks = tuple(getattr(model, a, None) for a in
+                            ("residual_x", "residual_y", "mean_x", "mean_y"))
+        #: the twin's sums know no hooks: a hooked model steps on the numpy reference
+        self._hooked = any(h is not None for h in self._hooks)
 
     def _init_batch(self, n_batch: int) -> None:
         #: the input of every sigma point when the caller gives none
@@ -307,7 +321,11 @@ class UnscentedKalmanFilter(Estimator):
         X = self._draw(x, P)
         U = np.repeat(u, N, axis=0)
         Xf = self._f(X.reshape(n_b * N, n), U).reshape(n_b, N, n)
-        x_pred, P_pred = _mean_covariance(Xf, self.points)
+        if self._hooks[0] is not None or self._hooks[2] is not None:
+            x_pred, D = hooked_moments(Xf, self.points.Wm, self._hooks[2], self._hooks[0])
+            P_pred = symmetrize(hooked_cross(D, D, self.points.Wc))
+        else:
+            x_pred, P_pred = _mean_covariance(Xf, self.points)
         P_pred = P_pred + self._GQGt
         X_pred = self._draw(x_pred, P_pred) if self.redraw else Xf
         return self._correct(x_pred, P_pred, X_pred, y, valid)
@@ -317,14 +335,21 @@ class UnscentedKalmanFilter(Estimator):
         n_b, N, n = X.shape
         sp = self.points
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
-        y_hat, DZ, dz, cz = _moments(Z, sp)
-        _, DX, dx, cx = _moments(X, sp)
-        S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
-        Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        res_x, res_y, _, mean_y = self._hooks
+        if self._hooked:                               # textbook sums through the hooks
+            y_hat, DZ = hooked_moments(Z, sp.Wm, mean_y, res_y)
+            DX = X - x[:, None] if res_x is None else res_x(X, x[:, None])
+            S = symmetrize(hooked_cross(DZ, DZ, sp.Wc))
+            Pxz = hooked_cross(DX, DZ, sp.Wc)
+        else:
+            y_hat, DZ, dz, cz = _moments(Z, sp)
+            _, DX, dx, cx = _moments(X, sp)
+            S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
+            Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
         S = S + self.model.R
         W = spd_inverse(S)
         K = Pxz @ W
-        e = y - y_hat
+        e = y - y_hat if res_y is None else res_y(y, y_hat)
         x_new = x + (K @ e[:, :, None])[:, :, 0]
         P_new = symmetrize(P - K @ Pxz.mT)
         nis = ((W @ e[:, :, None])[:, :, 0] * e).sum(axis=1)
@@ -342,7 +367,7 @@ class UnscentedKalmanFilter(Estimator):
         unscented transform of ``f`` at each filtered estimate (this filter's sigma points)
         and the cross-covariance ``C = Σ Wᶜ (χᵢ − x̂)(f(χᵢ) − x⁻)ᵀ``. Returns a
         :class:`~fir_gym.estimators.sequences.SmootherResult`."""
-        return smooth_sequence(self, ys, us, self._smoother_prediction)
+        return smooth_sequence(self, ys, us, self._smoother_prediction, self._hooks[0])
 
     def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
                              ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -351,6 +376,12 @@ class UnscentedKalmanFilter(Estimator):
         N = sp.num_points
         X = self._draw(x, P)
         Xf = self._f(X.reshape(n_b * N, n), np.repeat(u, N, axis=0)).reshape(n_b, N, n)
+        res_x, _, mean_x, _ = self._hooks
+        if res_x is not None or mean_x is not None:
+            x_pred, DF = hooked_moments(Xf, sp.Wm, mean_x, res_x)
+            DX = X - x[:, None] if res_x is None else res_x(X, x[:, None])
+            P_pred = symmetrize(hooked_cross(DF, DF, sp.Wc)) + self._GQGt
+            return x_pred, P_pred, hooked_cross(DX, DF, sp.Wc)
         x_pred, DF, df, cf = _moments(Xf, sp)
         _, DX, dx, cx = _moments(X, sp)
         P_pred = symmetrize(_cross(DF, df, cf, DF, df, cf, sp)) + self._GQGt
@@ -358,6 +389,9 @@ class UnscentedKalmanFilter(Estimator):
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        if self._hooked:
+            self._numpy_step(y, self._no_input, valid)
+            return
         x, P, sp = self._x, self._P, self.points
         assert x is not None and P is not None
         X = compiled_unscented.sigma_points(x, P, sp.xi, self.jitter)
@@ -365,6 +399,9 @@ class UnscentedKalmanFilter(Estimator):
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
+        if self._hooked:
+            self._numpy_step(y, u, valid)
+            return
         x, P, sp = self._x, self._P, self.points
         assert x is not None and P is not None
         n_b, n = x.shape
