@@ -19,6 +19,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._batched_check import check_model_batched
 from ._kalman_linalg import logdet_of_inverse
 from ._validation import FloatArray
 from .base import Estimator
@@ -100,6 +101,8 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R_batch = np.ascontiguousarray(model.R)[None]       # the compiled step's layout
         self._plain_linear = _is_plain_linear(model, self._f, self._F, self._h, self._H)
+        if not self._plain_linear:
+            check_model_batched(self)
         self._residual_x = getattr(model, "residual_x", None)
         self._residual_y = getattr(model, "residual_y", None)
         if self._n_b:

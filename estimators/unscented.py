@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._batched_check import check_model_batched
 from ._hooked_moments import hooked_cross, hooked_moments
 from ._kalman_linalg import cholesky, logdet_of_inverse, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
@@ -294,6 +295,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         if getattr(model, "time_invariant", True) is False:
             raise TypeError(f"model must have time-free f/h for {type(self).__name__}")
         self._f, _, self._h, _ = model_callables(model)
+        check_model_batched(self)
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R = np.ascontiguousarray(model.R)
         #: the model's residual and mean hooks (all None for a plain model)

@@ -155,3 +155,28 @@ def test_copies_between_predict_and_update_have_the_same_future(cls):
     flt.predict(U[0])
     for twin in (copy.deepcopy(flt), pickle.loads(pickle.dumps(flt))):
         np.testing.assert_array_equal(twin.update(Y[1]), copy.deepcopy(flt).update(Y[1]))
+
+
+@pytest.mark.parametrize("cls", [ExtendedKalmanFilter, UnscentedKalmanFilter])
+def test_a_one_point_model_callable_gets_a_message_that_says_what_to_do(cls):
+    """filterpy's ``fx(x, dt)`` indexes ``x[i]``: on a batch it fails or (for ``B = n``)
+    returns a transposed result. The filter refuses it at construction, with the fix."""
+    def f_one(x, u):
+        return np.array([x[0] + 0.1 * x[1], 0.9 * x[1]])
+
+    def f_batched(x, u):
+        return np.stack([x[..., 0] + 0.1 * x[..., 1], 0.9 * x[..., 1]], axis=-1)
+
+    def h(x):
+        return x[..., :1]
+
+    one = StateSpaceModel(f=f_one, h=h, Q=np.eye(2), R=1.0)
+    with pytest.raises(TypeError, match=r"model.f must take a leading batch axis.*x\[\.\.\., i\]"):
+        cls(one)
+    with pytest.raises(TypeError, match=r"model\.h must take a leading batch axis"):
+        cls(StateSpaceModel(f=f_batched, h=lambda x: np.array([x[0]]), Q=np.eye(2), R=1.0))
+    wrapped = one.replace(f=np.vectorize(f_one, signature="(n),(m)->(k)"))   # as suggested
+    ys = np.sin(np.arange(20.0))[:, None]
+    np.testing.assert_allclose(
+        cls(wrapped).filter(ys).x,
+        cls(StateSpaceModel(f=f_batched, h=h, Q=np.eye(2), R=1.0)).filter(ys).x, rtol=1e-9)
