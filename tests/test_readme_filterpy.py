@@ -23,5 +23,5 @@ def test_the_filterpy_section_runs_as_written():
     assert blocks
     namespace: dict = {}
     for block in blocks:
-        exec(compile(block, str(README), "exec"), namespace)   # noqa: S102 - our own README
+        exec(compile(block, str(README), "exec"), namespace)
     assert namespace["run"].x.shape == (50, 2)
