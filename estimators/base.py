@@ -60,11 +60,10 @@ import scipy.stats
 from numpy.typing import ArrayLike
 
 from . import compiled
-from ._validation import FloatArray, as_batch, as_covariance, one_of, positive, real_array
+from ._attributes import LiveAttributes
+from ._validation import FloatArray, as_batch, as_covariance, positive, real_array
 from .model import StateSpaceModel
 from .sequences import FilterResult, filter_sequence
-
-NAN_POLICIES = ("raise", "skip")
 
 #: what a numpy hook returns: ``(x, P, nis)``, or ``(x, P, nis, log det S)`` for a filter
 #: with a Gaussian innovation (its log-likelihood, :attr:`Estimator.last_info`)
@@ -84,7 +83,7 @@ def _all_finite(a: np.ndarray) -> bool:
     return bool(np.isfinite(a).all())
 
 
-class Estimator(ABC):
+class Estimator(LiveAttributes, ABC):
     """Base class of all filters: prior handling, batching, validation, divergence.
 
     Subclasses implement :meth:`_update` (the first step) and
@@ -108,9 +107,6 @@ class Estimator(ABC):
     #: whether the step computes the Gaussian log-likelihood of its innovation (the
     #: Kalman family; ``log det S`` comes from the step)
     reports_likelihood: ClassVar[bool] = False
-    #: whether ``est.model = new_model`` takes effect (the class rebuilds what it derived from
-    #: the model in :meth:`_model_changed`); otherwise assignment is refused
-    model_reassignable: ClassVar[bool] = False
     #: whether the class has compiled twins of its step (:meth:`_compiled_update`,
     #: :meth:`_compiled_predict_update`)
     has_compiled_step: ClassVar[bool] = False
@@ -153,70 +149,6 @@ class Estimator(ABC):
         self.reset(x0, P0)
 
     # ------------------------------------------------------------------ public API
-    @property
-    def model(self) -> StateSpaceModel:
-        """The filter's model. Assigning a new one of the same sizes (``n_x, n_y, n_u``) takes
-        effect at the next step on the Kalman family (``model_reassignable``), the state and
-        covariance kept — e.g. ``kf.model = kf.model.replace(R=2 * kf.model.R)``; the other
-        filters, which precompute gains from their model, refuse it with an error."""
-        return self._filter_model
-
-    @model.setter
-    def model(self, model: StateSpaceModel) -> None:
-        if "_filter_model" not in self.__dict__ or model is self._filter_model:
-            self._filter_model: StateSpaceModel = model    # the constructor's assignment
-            return
-        name = type(self).__name__
-        if not self.model_reassignable:
-            raise AttributeError(f"{name}.model cannot be reassigned: the filter precomputes "
-                                 f"its gains from the model. Build a new {name} from the new "
-                                 f"model instead")
-        if not isinstance(model, StateSpaceModel):
-            raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
-        old = self._filter_model
-        sizes = ("n_x", "n_y", "n_u")
-        if any(getattr(model, a) != getattr(old, a) for a in sizes):
-            raise ValueError(f"model must keep the sizes of {name}'s model "
-                             f"(n_x, n_y, n_u = {tuple(getattr(old, a) for a in sizes)}); "
-                             f"got {tuple(getattr(model, a) for a in sizes)}: build a new filter")
-        self._filter_model = model
-        try:
-            self._model_changed()
-        except Exception:
-            self._filter_model = old
-            self._model_changed()
-            raise
-
-    def _model_changed(self) -> None:  # noqa: B027 (optional hook)
-        """Hook: rebuild what the filter derived from ``self.model`` (a new one was assigned)."""
-
-    @property
-    def max_covariance_trace(self) -> float:
-        """Divergence limit on ``trace(P)`` (assignable)."""
-        return float(self._limits[2])
-
-    @max_covariance_trace.setter
-    def max_covariance_trace(self, value: float) -> None:
-        self._limits[2] = positive("max_covariance_trace", value)
-
-    @property
-    def nis_patience(self) -> int:
-        """Consecutive high-NIS steps that flag divergence (assignable)."""
-        return int(self._limits[1])
-
-    @nis_patience.setter
-    def nis_patience(self, value: int) -> None:
-        self._limits[1] = float(positive("nis_patience", value, integer=True))
-
-    @property
-    def nan_policy(self) -> str:
-        """``"raise"`` or ``"skip"`` for non-finite measurements (assignable)."""
-        return self._nan_policy
-
-    @nan_policy.setter
-    def nan_policy(self, value: str) -> None:
-        self._nan_policy = one_of("nan_policy", value, NAN_POLICIES)
-
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None) -> None:
         """Set the prior of ``x[0]``: mean ``x0`` (default 0) and covariance ``P0`` (default I).
 
@@ -420,13 +352,13 @@ class Estimator(ABC):
         return self._k
 
     # ------------------------------------------------------------------ to implement
-    def _reset_state(self) -> None:  # noqa: B027 (optional hook)
+    def _reset_state(self) -> None:
         """Hook for subclasses to clear their own state on ``reset``."""
 
-    def _restart_systems(self, mask: np.ndarray) -> None:  # noqa: B027 (optional hook)
+    def _restart_systems(self, mask: np.ndarray) -> None:
         """Hook: clear the per-system state of the systems in ``mask`` (see :meth:`restart`)."""
 
-    def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
+    def _init_batch(self, n_batch: int) -> None:
         """Hook: allocate per-system state once the batch size is known."""
 
     def _step_info(self) -> dict[str, Any]:
