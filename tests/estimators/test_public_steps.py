@@ -6,13 +6,12 @@ changed mid-run), and the filter's own ``step`` (``predict + update == step``).
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import pickle
 
 import numpy as np
 import pytest
-from compiled_paths import numpy_path
+from compiled_paths import on_path
 from sequence_data import tracking
 
 from fir_gym.estimators import (
@@ -44,7 +43,7 @@ def test_predict_then_update_equals_step(cls, path):
     model, Y, U = tracking(T=40, B=3)
     Y = np.ma.masked_invalid(Y)
     Y[7, 2] = np.ma.masked                             # one system misses one measurement
-    with numpy_path() if path == "numpy" else contextlib.nullcontext():
+    with on_path(path):
         a, b = cls(model), cls(model)
         for k in range(40):
             u = None if k == 0 else U[k - 1]

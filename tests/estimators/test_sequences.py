@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.stats
-from compiled_paths import needs_twins, numpy_path
+from compiled_paths import needs_twins, numpy_path, on_path
 from sequence_data import robot, tracking
 
 from fir_gym.estimators import (
@@ -38,10 +38,7 @@ def test_filter_equals_pykalmans_reference_means_covariances_and_loglikelihood(c
     assert np.ma.count_masked(ys) > 0                  # the data set has missing entries
     for path in ("compiled", "numpy"):
         flt = cls(model, x0=d["initial_state_mean"], P0=d["initial_state_covariance"])
-        if path == "numpy":
-            with numpy_path():
-                res = flt.filter(ys, us)
-        else:
+        with on_path(path):
             res = flt.filter(ys, us)
         tol = 1e-6 if cls is UnscentedKalmanFilter else 1e-9      # the UT's round-off
         np.testing.assert_allclose(res.x, d["filtered_state_means"], rtol=tol, atol=tol)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from compiled_paths import needs_twins, numpy_path
+from compiled_paths import needs_twins, numpy_path, on_path
 from sequence_data import robot, tracking
 
 from fir_gym.estimators import (
@@ -31,10 +31,7 @@ SMOOTHERS = [KalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter]
 def test_smoother_equals_pykalmans_reference_on_the_robot_data(cls, path):
     model, d, ys, us = robot()
     flt = cls(model, x0=d["initial_state_mean"], P0=d["initial_state_covariance"])
-    if path == "numpy":
-        with numpy_path():
-            res = flt.smooth(ys, us)
-    else:
+    with on_path(path):
         res = flt.smooth(ys, us)
     tol = 1e-6 if cls is UnscentedKalmanFilter else 1e-9          # the UT's round-off
     np.testing.assert_allclose(res.x, d["smoothed_state_means"], rtol=tol, atol=tol)
