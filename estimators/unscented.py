@@ -279,16 +279,37 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
                             f"{type(model).__name__} (use KalmanFilter)")
         if points is None:
             points = MerweScaledSigmaPoints(getattr(model, "n_x", 1), alpha, beta, kappa)
-        if not isinstance(points, SigmaPoints):
-            raise TypeError(f"points must be a SigmaPoints instance; got {type(points).__name__}")
-        if isinstance(model, StateSpaceModel) and points.n != model.n_x:
-            raise ValueError(f"points must be for n = {model.n_x} (the model's n_x); "
-                             f"got n = {points.n}")
-        if not np.isfinite(jitter) or jitter < 0:
-            raise ValueError(f"jitter must be a non-negative number; got {jitter!r}")
-        self.points, self.redraw, self.jitter = points, bool(redraw), float(jitter)
+        self._n_x = getattr(model, "n_x", None)
+        self.points, self.redraw, self.jitter = points, bool(redraw), jitter
         super().__init__(model, x0=x0, P0=P0, **options)
         self._model_changed()
+
+    @property
+    def points(self) -> SigmaPoints:
+        """The sigma-point scheme (assignable: the next step uses it)."""
+        return self._points
+
+    @points.setter
+    def points(self, points: SigmaPoints) -> None:
+        if not isinstance(points, SigmaPoints):
+            raise TypeError(f"points must be a SigmaPoints instance; got {type(points).__name__}")
+        if self._n_x is not None and points.n != self._n_x:
+            raise ValueError(f"points must be for n = {self._n_x} (the model's n_x); "
+                             f"got n = {points.n}")
+        self._points = points
+        if getattr(self, "_n_b", 0):
+            self._init_batch(self._n_b)
+
+    @property
+    def jitter(self) -> float:
+        """Relative diagonal loading before each factorisation (assignable)."""
+        return self._jitter
+
+    @jitter.setter
+    def jitter(self, jitter: float) -> None:
+        if not np.isfinite(jitter) or jitter < 0:
+            raise ValueError(f"jitter must be a non-negative number; got {jitter!r}")
+        self._jitter = float(jitter)
 
     def _model_changed(self) -> None:
         model = self.model

@@ -179,3 +179,21 @@ def test_a_one_point_model_callable_gets_a_message_that_says_what_to_do(cls):
     np.testing.assert_allclose(
         cls(wrapped).filter(ys).x,
         cls(StateSpaceModel(f=f_batched, h=h, Q=np.eye(2), R=1.0)).filter(ys).x, rtol=1e-9)
+
+
+def test_ukf_points_and_jitter_take_effect_when_assigned():
+    from fir_gym.estimators import CubatureSigmaPoints
+
+    model, Y, U = tracking(T=15, B=2)
+    a = UnscentedKalmanFilter(model, points=CubatureSigmaPoints(2))
+    b = UnscentedKalmanFilter(model)
+    for k in range(15):
+        if k == 5:
+            b.points = CubatureSigmaPoints(2)      # fewer points: the next step uses them
+        xa = a.step(Y[k], None if k == 0 else U[k - 1])
+        xb = b.step(Y[k], None if k == 0 else U[k - 1])
+    np.testing.assert_allclose(xb, xa, rtol=1e-6)   # the scheme is exact on a linear model
+    with pytest.raises(ValueError, match="points must be for n = 2"):
+        b.points = CubatureSigmaPoints(3)
+    with pytest.raises(ValueError, match="jitter must be"):
+        b.jitter = -1.0
