@@ -166,3 +166,72 @@ def test_bad_sequences_name_the_argument():
     kf.filter(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="reset"):
         kf.filter(np.zeros((3, 4, 2)))
+
+
+def rollout(env_id: str, name: str):
+    """The estimator on a plant's model (its default prior; FIR horizon 6) and one rollout's
+    measurements ``ys (T, n_y)`` and inputs ``us (T - 1, n_u)`` (``us[k]`` after ``ys[k]``)."""
+    import gymnasium as gym
+
+    from fir_gym.estimators import estimator_class
+    from fir_gym.wrappers import default_prior
+
+    env = gym.make(env_id)
+    cls = estimator_class(name)
+    x0, P0 = default_prior(env)
+    opts = {"x0": x0, "P0": P0} if x0 is not None else {}
+    if "fir" in name:
+        opts["horizon"] = 6
+    flt = cls(getattr(env.unwrapped, cls.model_attribute), **opts)
+    rng = np.random.default_rng(5)
+    y, _ = env.reset(seed=2)
+    ys, us = [y], []
+    for _ in range(24):
+        y, _, terminated, truncated, info = env.step(0.3 * rng.uniform(-1, 1,
+                                                                       env.action_space.shape))
+        if terminated or truncated:
+            break
+        ys.append(y)
+        us.append(info["action"])
+    env.close()
+    return flt, np.array(ys, dtype=np.float64), np.array(us[:len(ys) - 1], dtype=np.float64)
+
+
+def every_plant_and_estimator() -> list[tuple[str, str]]:
+    import warnings
+
+    import gymnasium as gym
+
+    import fir_gym
+    from fir_gym.benchmarks.estimators import _applicable
+
+    cases = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for env_id in fir_gym.ENV_IDS:
+            env = gym.make(env_id)
+            cases += [(env_id, name) for name, _, _ in _applicable(env)]
+            env.close()
+    return cases
+
+
+@pytest.mark.parametrize(("env_id", "name"), every_plant_and_estimator())
+def test_every_filter_on_every_plant_filters_a_sequence_as_its_step_loop(env_id, name):
+    import copy
+    import warnings
+
+    flt, ys, us = rollout(env_id, name)
+    loop = copy.deepcopy(flt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = flt.filter(ys, us)
+        for k in range(len(ys)):
+            np.testing.assert_array_equal(loop.step(ys[k], None if k == 0 else us[k - 1]),
+                                          res.x[k])
+    assert res.x.shape == (len(ys), flt.model.n_x)
+    assert (res.P is None) == (not flt.provides_covariance)
+    assert (res.log_likelihoods is None) == (not flt.reports_likelihood)
+    assert res.diverged.shape == (len(ys),)
+    if res.log_likelihoods is not None:
+        assert np.isfinite(res.log_likelihoods).all()
+        assert res.log_likelihood == pytest.approx(res.log_likelihoods.sum())
