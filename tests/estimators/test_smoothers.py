@@ -134,3 +134,62 @@ def test_smoother_on_the_compiled_path_equals_the_numpy_path(cls):
     # round-off relative to each array's scale (entries cross zero), as in test_compiled
     np.testing.assert_allclose(fast.x, slow.x, rtol=1e-9, atol=1e-9 * np.abs(slow.x).max())
     np.testing.assert_allclose(fast.P, slow.P, rtol=1e-9, atol=1e-9 * np.abs(slow.P).max())
+
+
+@pytest.mark.parametrize("kind", ["kalman", "unscented"])
+def test_smoothers_equal_stone_soups_on_a_constant_velocity_track(kind):
+    """Stone Soup's ``KalmanSmoother`` / ``UnscentedKalmanSmoother`` over its own filter's
+    track. Stone Soup predicts first: our prior is the one after its first prediction."""
+    pytest.importorskip("stonesoup")
+    import datetime
+
+    from stonesoup.models.measurement.linear import LinearGaussian
+    from stonesoup.models.transition.linear import (
+        CombinedLinearGaussianTransitionModel,
+        ConstantVelocity,
+    )
+    from stonesoup.predictor.kalman import KalmanPredictor, UnscentedKalmanPredictor
+    from stonesoup.smoother.kalman import KalmanSmoother, UnscentedKalmanSmoother
+    from stonesoup.types.array import StateVector
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.state import GaussianState
+    from stonesoup.types.track import Track
+    from stonesoup.updater.kalman import KalmanUpdater, UnscentedKalmanUpdater
+
+    step = datetime.timedelta(seconds=1.0)
+    transition = CombinedLinearGaussianTransitionModel([ConstantVelocity(0.05)] * 2)
+    sensor = LinearGaussian(ndim_state=4, mapping=(0, 2), noise_covar=np.diag([0.5, 0.5]))
+    A, Qd, C = transition.matrix(time_interval=step), transition.covar(time_interval=step), \
+        sensor.matrix()
+    rng = np.random.default_rng(0)
+    x, ys = np.array([0.0, 1.0, 0.0, 0.5]), []
+    for _ in range(40):
+        x = A @ x + rng.multivariate_normal(np.zeros(4), Qd)
+        ys.append(C @ x + np.sqrt(0.5) * rng.normal(size=2))
+    x0, P0 = np.zeros(4), 10.0 * np.eye(4)
+    if kind == "kalman":
+        predictor, updater, smoother = (KalmanPredictor(transition), KalmanUpdater(sensor),
+                                        KalmanSmoother(transition))
+    else:
+        predictor, updater, smoother = (UnscentedKalmanPredictor(transition),
+                                        UnscentedKalmanUpdater(sensor),
+                                        UnscentedKalmanSmoother(transition))
+    t0 = datetime.datetime(2026, 1, 1)
+    state, track = GaussianState(StateVector(x0), P0, timestamp=t0), Track()
+    for k, y in enumerate(ys):
+        when = t0 + (k + 1) * step
+        prediction = predictor.predict(state, timestamp=when)
+        state = updater.update(SingleHypothesis(
+            prediction, Detection(StateVector(y), timestamp=when, measurement_model=sensor)))
+        track.append(state)
+    theirs = smoother.smooth(track)
+    want_x = np.array([np.asarray(s.state_vector, float).ravel() for s in theirs])
+    want_P = np.array([np.asarray(s.covar, float) for s in theirs])
+    model = LinearModel(A=A, C=C, Q=Qd, R=np.diag([0.5, 0.5]))
+    # the UKF with Stone Soup's spread (alpha 0.5): the default 1e-3 weighs round-off by 1e6
+    flt = (KalmanFilter(model, x0=A @ x0, P0=A @ P0 @ A.T + Qd) if kind == "kalman" else
+           UnscentedKalmanFilter(model, x0=A @ x0, P0=A @ P0 @ A.T + Qd, alpha=predictor.alpha))
+    ours = flt.smooth(np.array(ys))
+    np.testing.assert_allclose(ours.x, want_x, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(ours.P, want_P, rtol=1e-10, atol=1e-10)
