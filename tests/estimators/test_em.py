@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sequence_data import robot
+from sequence_data import pykalman_robot, robot
 
 from fir_gym.estimators import LinearModel, em
 
@@ -20,15 +20,8 @@ def test_em_follows_the_data_sets_loglikelihoods_and_pykalmans_covariances():
     np.testing.assert_allclose(every.log_likelihoods, d["loglikelihoods"], rtol=1e-12)
     assert (np.diff(every.log_likelihoods) > 0).all()           # EM never goes down
     fit = em(model, ys, us, **prior, n_iter=5)
-    pk = pykalman.KalmanFilter(
-        transition_matrices=d["transition_matrix"],
-        observation_matrices=d["observation_matrix"],
-        transition_covariance=d["initial_transition_covariance"],
-        observation_covariance=d["initial_observation_covariance"],
-        transition_offsets=d["transition_offsets"], observation_offsets=d["observation_offset"],
-        initial_state_mean=d["initial_state_mean"],
-        initial_state_covariance=d["initial_state_covariance"],
-        em_vars=["transition_covariance", "observation_covariance"])
+    pk = pykalman_robot(d, initial=True,
+                        em_vars=["transition_covariance", "observation_covariance"])
     pk = pk.em(d["observations"], n_iter=5)
     np.testing.assert_allclose(fit.model.Q, pk.transition_covariance, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(fit.model.R, pk.observation_covariance, rtol=1e-9, atol=1e-12)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import scipy.stats
 from compiled_paths import needs_twins, numpy_path, on_path
-from sequence_data import robot, tracking
+from plant_cases import applicable
+from sequence_data import pykalman_robot, robot, tracking
 
 from fir_gym.estimators import (
     ExtendedFIRFilter,
@@ -43,14 +44,7 @@ def test_filter_equals_pykalmans_reference_means_covariances_and_loglikelihood(c
         tol = 1e-6 if cls is UnscentedKalmanFilter else 1e-9      # the UT's round-off
         np.testing.assert_allclose(res.x, d["filtered_state_means"], rtol=tol, atol=tol)
         np.testing.assert_allclose(res.P, d["filtered_state_covariances"], rtol=tol, atol=tol)
-        pk = pykalman.KalmanFilter(
-            transition_matrices=d["transition_matrix"],
-            observation_matrices=d["observation_matrix"],
-            transition_covariance=d["transition_covariance"],
-            observation_covariance=d["observation_covariance"],
-            transition_offsets=d["transition_offsets"], observation_offsets=d["observation_offset"],
-            initial_state_mean=d["initial_state_mean"],
-            initial_state_covariance=d["initial_state_covariance"])
+        pk = pykalman_robot(d)
         assert res.log_likelihood == pytest.approx(pk.loglikelihood(d["observations"]),
                                                    rel=1e-12 if tol < 1e-6 else 1e-10)
         assert res.log_likelihoods.shape == (501,) and res.nis.shape == (501,)
@@ -197,25 +191,7 @@ def rollout(env_id: str, name: str):
     return flt, np.array(ys, dtype=np.float64), np.array(us[:len(ys) - 1], dtype=np.float64)
 
 
-def every_plant_and_estimator() -> list[tuple[str, str]]:
-    import warnings
-
-    import gymnasium as gym
-
-    import fir_gym
-    from fir_gym.benchmarks.estimators import _applicable
-
-    cases = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for env_id in fir_gym.ENV_IDS:
-            env = gym.make(env_id)
-            cases += [(env_id, name) for name, _, _ in _applicable(env)]
-            env.close()
-    return cases
-
-
-@pytest.mark.parametrize(("env_id", "name"), every_plant_and_estimator())
+@pytest.mark.parametrize(("env_id", "name"), applicable())
 def test_every_filter_on_every_plant_filters_a_sequence_as_its_step_loop(env_id, name):
     import copy
     import warnings

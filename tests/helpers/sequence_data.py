@@ -38,3 +38,18 @@ def tracking(T: int = 80, B: int = 3, seed: int = 0
         if k < T - 1:
             x = x @ model.A.T + U[k] @ model.B.T + rng.normal(size=(B, 1)) @ model.G.T * 0.7
     return model, np.stack(ys), U
+
+
+def pykalman_robot(d: dict, initial: bool = False, **options: object) -> object:
+    """pykalman's own ``KalmanFilter`` on the robot data set (its offsets as they are)."""
+    import pykalman
+
+    pre = "initial_" if initial else ""
+    return pykalman.KalmanFilter(
+        transition_matrices=d["transition_matrix"],
+        observation_matrices=d["observation_matrix"],
+        transition_covariance=d[pre + "transition_covariance"],
+        observation_covariance=d[pre + "observation_covariance"],
+        transition_offsets=d["transition_offsets"], observation_offsets=d["observation_offset"],
+        initial_state_mean=d["initial_state_mean"],
+        initial_state_covariance=d["initial_state_covariance"], **options)
