@@ -183,8 +183,9 @@ class Estimator(LiveAttributes, ABC):
         self._logdet: FloatArray = np.zeros(0)
         self._fresh: np.ndarray = np.zeros(0, bool)
         self._k = 0
-        #: whether :meth:`predict` has run since the last update (the next step updates only)
-        self._predicted = False
+        #: whether the next step is an update only: the first after ``reset``, or one after
+        #: ``predict`` (:mod:`.public_steps`)
+        self._update_next = True
         self._single = False
         self._restarting = False
         self._y_shape: tuple[int, ...] | None = None
@@ -245,14 +246,6 @@ class Estimator(LiveAttributes, ABC):
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
         self._last_valid: np.ndarray = valid
-        self._dispatch_step(Y, U, valid)
-        self._k += 1
-        self._predicted = False
-        x = self._x
-        return x[0].copy() if self._single else x.copy()
-
-    def _dispatch_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
-        """One step on checked arrays: the compiled twin or the numpy reference."""
         if compiled.ENABLED and self.has_compiled_step:
             if self._update_next:
                 self._compiled_update(Y, valid)
@@ -263,6 +256,10 @@ class Estimator(LiveAttributes, ABC):
         if self._restarting:
             self._fresh[:] = False
             self._restarting = False
+        self._k += 1
+        self._update_next = False
+        x = self._x
+        return x[0].copy() if self._single else x.copy()
 
     def filter(self, ys: ArrayLike, us: ArrayLike | None = None) -> FilterResult:
         """Run the filter over a whole sequence: ``step(ys[k], us[k-1])`` for every ``k``.
@@ -562,12 +559,6 @@ class Estimator(LiveAttributes, ABC):
         self._none_predict = np.zeros(n_batch, bool)
         self._no_input = np.zeros((n_batch, self.model.n_u))
         self._init_batch(n_batch)
-
-    @property
-    def _update_next(self) -> bool:
-        """Whether the next step is an update only: the first after ``reset``, or one after
-        :meth:`predict`."""
-        return self._k == 0 or self._predicted
 
     def _predicting(self) -> np.ndarray:
         """The systems that predict this step (the compiled twins' ``predict`` mask)."""

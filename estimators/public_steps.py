@@ -18,7 +18,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, as_covariance, as_matrix
@@ -44,21 +43,20 @@ class PublicSteps:
         predict-first habit).
         """
         est: Estimator = self  # type: ignore[assignment]
-        if not est._n_b:
-            est._no_measurement()                      # fixes the batch size
-        Y, valid = np.zeros((est._n_b, est._n_y)), np.zeros(est._n_b, bool)
-        U = est._no_input if u is None else est._input(u)
-        k, run = est._k, est._nis_run.copy()
-        est._predicted = False
-        est._k = max(k, 1)                             # the prediction branch, A(k-1) of k >= 1
+        k, pending, run = est._k, est._update_next, est._nis_run.copy()
+        est._update_next = False                       # the prediction branch, A(k-1) of k >= 1
+        est._k = max(k, 1)
         try:
-            est._dispatch_step(Y, U, valid)
+            x = est.step(None, u)                      # a step without a measurement
+        except BaseException:
+            est._update_next = pending
+            raise
         finally:
             est._k = k
-            est._nis_run[:] = run
-        est._predicted = True
-        est._last_valid = valid
-        return est._out(est._x)
+            if est._nis_run.shape == run.shape:
+                est._nis_run[:] = run
+        est._update_next = True
+        return x
 
     def update(self, y: ArrayLike | None, R: ArrayLike | Callable[[FloatArray], Any] | None = None,
                H: ArrayLike | None = None) -> FloatArray:
@@ -90,11 +88,13 @@ class PublicSteps:
         if changes:
             est._filter_model = model.replace(**changes)
             est._model_changed()
-        est._predicted = True
+        pending, est._update_next = est._update_next, True
         try:
             return est.step(y)
+        except BaseException:
+            est._update_next = pending
+            raise
         finally:
-            est._predicted = False
             if changes:
                 est._filter_model = model
                 est._model_changed()
