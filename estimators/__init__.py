@@ -13,6 +13,7 @@ from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
 from .discretize import discretize_lti, linear_model_from_continuous
 from .efir import ExtendedFIRFilter
+from .em import EMResult, em
 from .errors import EstimatorOptionError, IncompatibleModelError
 from .extended import ExtendedKalmanFilter
 from .fir import FIRFilter
@@ -40,6 +41,7 @@ __all__ = [
     "ContinuousEstimator",
     "ContinuousModel",
     "CubatureSigmaPoints",
+    "EMResult",
     "Estimator",
     "EstimatorOptionError",
     "ExtendedFIRFilter",
@@ -66,6 +68,7 @@ __all__ = [
     "chi2_band",
     "continuous_fir",
     "discretize_lti",
+    "em",
     "estimator_class",
     "estimator_names",
     "fir_gains",

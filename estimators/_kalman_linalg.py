@@ -134,3 +134,13 @@ def spd_inverse(S: FloatArray) -> FloatArray:
         W[:, 0, 1] = W[:, 1, 0] = -b / det
         return W
     return cho_solve(cholesky(S), np.broadcast_to(eye(m), S.shape))
+
+
+def logdet_of_inverse(W: FloatArray, n_b: int) -> FloatArray:
+    """``log det S`` of each system from ``W = S⁻¹`` (``(1 | B, m, m)``): ``−log det W``
+    (LU, :func:`numpy.linalg.slogdet`), NaN where ``W`` is not finite or not positive
+    definite; ``(B,)``, a shared ``W`` broadcast to the ``n_b`` systems."""
+    with np.errstate(all="ignore"):
+        sign, logdet = np.linalg.slogdet(W)
+    out = np.where(sign > 0, -logdet, np.nan)
+    return np.array(np.broadcast_to(out, (n_b,)))

@@ -60,12 +60,17 @@ import scipy.stats
 from numpy.typing import ArrayLike
 
 from . import compiled
-from ._validation import FloatArray, as_batch, as_covariance, one_of, positive, real_array
+from ._attributes import LiveAttributes
+from ._validation import FloatArray, as_batch, as_covariance, positive, real_array
 from .model import StateSpaceModel
+from .sequences import FilterResult, filter_sequence
 
-NAN_POLICIES = ("raise", "skip")
+#: what a numpy hook returns: ``(x, P, nis)``, or ``(x, P, nis, log det S)`` for a filter
+#: with a Gaussian innovation (its log-likelihood, :attr:`Estimator.last_info`)
+StepResult = tuple[Any, ...]
 
 _F64 = np.dtype(np.float64)
+_LOG_2PI = math.log(2.0 * math.pi)
 
 
 def _all_finite(a: np.ndarray) -> bool:
@@ -78,7 +83,7 @@ def _all_finite(a: np.ndarray) -> bool:
     return bool(np.isfinite(a).all())
 
 
-class Estimator(ABC):
+class Estimator(LiveAttributes, ABC):
     """Base class of all filters: prior handling, batching, validation, divergence.
 
     Subclasses implement :meth:`_update` (the first step) and
@@ -99,6 +104,9 @@ class Estimator(ABC):
     model_attribute: ClassVar[str] = "model"
     #: whether the step computes a normalised innovation squared (``last_info["nis"]``)
     reports_nis: ClassVar[bool] = True
+    #: whether the step computes the Gaussian log-likelihood of its innovation (the
+    #: Kalman family; ``log det S`` comes from the step)
+    reports_likelihood: ClassVar[bool] = False
     #: whether the class has compiled twins of its step (:meth:`_compiled_update`,
     #: :meth:`_compiled_predict_update`)
     has_compiled_step: ClassVar[bool] = False
@@ -126,19 +134,18 @@ class Estimator(ABC):
     ) -> None:
         if not isinstance(model, StateSpaceModel):
             raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
-        one_of("nan_policy", nan_policy, NAN_POLICIES)
         self.model = model
         self._n_y = model.n_y
         self.nan_policy = nan_policy
-        self.max_covariance_trace = positive("max_covariance_trace", max_covariance_trace)
+        max_trace = positive("max_covariance_trace", max_covariance_trace)
         tail = positive("nis_tail", nis_tail)
         if tail >= 1:
             raise ValueError(f"nis_tail must be in (0, 1); got {nis_tail!r}")
-        self.nis_patience = positive("nis_patience", nis_patience, integer=True)
+        patience = positive("nis_patience", nis_patience, integer=True)
         self._nis_threshold = float(scipy.stats.chi2.isf(tail, model.n_y))
-        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`)
-        self._limits = np.array([self._nis_threshold, float(self.nis_patience),
-                                 self.max_covariance_trace])
+        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`); the
+        #: properties ``nis_patience`` and ``max_covariance_trace`` read and write them
+        self._limits = np.array([self._nis_threshold, float(patience), max_trace])
         self.reset(x0, P0)
 
     # ------------------------------------------------------------------ public API
@@ -173,8 +180,12 @@ class Estimator(ABC):
         self._diverged: np.ndarray = np.zeros(0, bool)
         self._nis_run: np.ndarray = np.zeros(0, np.int64)
         self._nis: FloatArray = np.zeros(0)
+        self._logdet: FloatArray = np.zeros(0)
         self._fresh: np.ndarray = np.zeros(0, bool)
         self._k = 0
+        #: whether the next step is an update only: the first after ``reset``, or one after
+        #: ``predict`` (:mod:`.public_steps`)
+        self._update_next = True
         self._single = False
         self._restarting = False
         self._y_shape: tuple[int, ...] | None = None
@@ -219,8 +230,12 @@ class Estimator(ABC):
         self._restarting = True
         self._restart_systems(mask)
 
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+    def step(self, y: ArrayLike | None, u: ArrayLike | None = None) -> FloatArray:
         """Consume ``y[k]`` (and ``u[k-1]``) and return the estimate of ``x[k]``.
+
+        ``y = None`` means no measurement this step (every system predicts only), and so
+        do the masked entries of a ``numpy.ma`` array (a system with any masked entry
+        predicts only), whatever ``nan_policy`` says.
 
         The boundary checks are cheap (a type test, a shape comparison, a finiteness
         test: a Python sum of up to 16 values, else ``np.isfinite``); the step is then
@@ -230,8 +245,9 @@ class Estimator(ABC):
         """
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
+        self._last_valid: np.ndarray = valid
         if compiled.ENABLED and self.has_compiled_step:
-            if self._k == 0:
+            if self._update_next:
                 self._compiled_update(Y, valid)
             else:
                 self._compiled_predict_update(Y, U, valid)
@@ -241,8 +257,32 @@ class Estimator(ABC):
             self._fresh[:] = False
             self._restarting = False
         self._k += 1
+        self._update_next = False
         x = self._x
         return x[0].copy() if self._single else x.copy()
+
+    def filter(self, ys: ArrayLike, us: ArrayLike | None = None) -> FilterResult:
+        """Run the filter over a whole sequence: ``step(ys[k], us[k-1])`` for every ``k``.
+
+        Args:
+            ys: measurements ``(T, n_y)``, or ``(T, B, n_y)`` for a batch (``(T,)`` when
+                ``n_y = 1``); ``ys[0]`` is the first (the one ``env.reset`` returns). NaN and
+                masked (``numpy.ma``) entries are missing measurements.
+            us: inputs ``(T − 1, n_u)`` or ``(T − 1, B, n_u)`` (``T`` rows accepted, the
+                last unused): ``us[k]`` is the input applied between ``ys[k]`` and
+                ``ys[k+1]``, as in an env loop. ``None``: no input.
+
+        Returns:
+            A :class:`~fir_gym.estimators.sequences.FilterResult` (estimates, covariances,
+            log-likelihoods, NIS and divergence flags per step). The filter continues from
+            its current state and ends where the sequence ends: call :meth:`reset` first
+            for a fresh run. The loop is :meth:`step` itself (compiled or numpy path alike),
+            so the result equals a step-by-step run exactly.
+
+        Raises:
+            ValueError: naming ``ys`` or ``us`` on a wrong shape or length.
+        """
+        return filter_sequence(self, ys, us)
 
     @property
     def x(self) -> FloatArray:
@@ -276,15 +316,32 @@ class Estimator(ABC):
 
         ``diverged`` (as :attr:`diverged`), ``nis`` (the normalised innovation squared:
         a float or ``(B,)``, NaN where a measurement was skipped; ``None`` for filters
-        without one) and the filter's own keys (e.g. the windowed filters'
-        ``startup`` and ``rank_deficient``).
+        without one), ``log_likelihood`` (the Gaussian log-density of the innovation,
+        ``−½ (eᵀ S⁻¹ e + log det 2π S)``: pykalman's ``loglikelihood`` term; 0 where a
+        measurement was skipped, ``None`` for filters without an innovation covariance)
+        and the filter's own keys (e.g. the windowed filters' ``startup`` and
+        ``rank_deficient``).
         """
         if not self._n_b or self._k == 0:
             return {}
         nis: Any = None
+        ll: Any = None
         if self.reports_nis:
             nis = float(self._nis[0]) if self._single else self._nis.copy()
-        return {"diverged": self.diverged, "nis": nis, **self._step_info()}
+        if self.reports_likelihood:
+            lls = self._log_likelihoods()
+            ll = float(lls[0]) if self._single else lls
+        return {"diverged": self.diverged, "nis": nis, "log_likelihood": ll,
+                **self._step_info()}
+
+    def _log_likelihoods(self) -> FloatArray:
+        """``(B,)`` Gaussian log-likelihood of the last innovation of every system: 0 where
+        the measurement was missing, ``-inf`` where it was usable but ``S`` was not positive
+        definite (module docstring, *Divergence*)."""
+        m = self._n_y
+        with np.errstate(invalid="ignore"):
+            ll = -0.5 * (self._nis + self._logdet + m * _LOG_2PI)
+        return np.where(self._last_valid, np.where(np.isfinite(ll), ll, -np.inf), 0.0)
 
     @property
     def time_step(self) -> int:
@@ -292,13 +349,13 @@ class Estimator(ABC):
         return self._k
 
     # ------------------------------------------------------------------ to implement
-    def _reset_state(self) -> None:  # noqa: B027 (optional hook)
+    def _reset_state(self) -> None:
         """Hook for subclasses to clear their own state on ``reset``."""
 
-    def _restart_systems(self, mask: np.ndarray) -> None:  # noqa: B027 (optional hook)
+    def _restart_systems(self, mask: np.ndarray) -> None:
         """Hook: clear the per-system state of the systems in ``mask`` (see :meth:`restart`)."""
 
-    def _init_batch(self, n_batch: int) -> None:  # noqa: B027 (optional hook)
+    def _init_batch(self, n_batch: int) -> None:
         """Hook: allocate per-system state once the batch size is known."""
 
     def _step_info(self) -> dict[str, Any]:
@@ -306,8 +363,7 @@ class Estimator(ABC):
         return {}
 
     def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
-                        valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                        valid: np.ndarray) -> StepResult:
         """First step of the restarted systems ``idx`` (their prior rows ``x``, ``P``).
 
         The default calls :meth:`_update` on the sub-batch, which is right for filters
@@ -318,13 +374,12 @@ class Estimator(ABC):
 
     @abstractmethod
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                ) -> StepResult:
         """First step: measurement update of the prior with ``y[0]`` (numpy reference)."""
 
     @abstractmethod
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray
-                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                        valid: np.ndarray) -> StepResult:
         """Later steps: predict with ``u[k-1]``, then update with ``y[k]`` (numpy reference)."""
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
@@ -340,14 +395,16 @@ class Estimator(ABC):
     # ------------------------------------------------------------------ the numpy step
     def _numpy_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
         with np.errstate(all="ignore"):
-            if self._k == 0:
-                x, P, nis = self._update(self._x, self._P, Y, valid)
+            if self._update_next:
+                out = self._update(self._x, self._P, Y, valid)
             else:
                 x_prior, P_prior = self._x, self._P
-                x, P, nis = self._predict_update(x_prior, P_prior, Y, U, valid)
+                out = self._predict_update(x_prior, P_prior, Y, U, valid)
                 if self._restarting:
-                    x, P, nis = self._first_steps(x, P, nis, x_prior, P_prior, Y, valid)
+                    out = self._first_steps(*_four(out), x_prior, P_prior, Y, valid)
+            x, P, nis, logdet = _four(out)
             self._accept(x, P, nis, valid)
+            self._logdet[:] = np.nan if logdet is None else logdet
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
@@ -389,11 +446,12 @@ class Estimator(ABC):
         self._nis[:] = np.nan if nis is None else nis
 
     def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
-                     x_prior: FloatArray, P_prior: FloatArray, Y: FloatArray, valid: np.ndarray
-                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+                     logdet: FloatArray | None, x_prior: FloatArray, P_prior: FloatArray,
+                     Y: FloatArray, valid: np.ndarray) -> StepResult:
         """Replace the rows of restarted systems by their first step (an update only)."""
         idx = np.flatnonzero(self._fresh)
-        xs, Ps, ns = self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx], valid[idx])
+        xs, Ps, ns, lds = _four(self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx],
+                                                     valid[idx]))
         x = np.array(x)
         x[idx] = xs
         if P is not None and Ps is not None:
@@ -402,12 +460,20 @@ class Estimator(ABC):
         if nis is not None:
             nis = np.array(nis)
             nis[idx] = np.nan if ns is None else ns
-        return x, P, nis
+        if logdet is not None:
+            logdet = np.array(logdet)
+            logdet[idx] = np.nan if lds is None else lds
+        return x, P, nis, logdet
 
     # ------------------------------------------------------------------ the boundary
-    def _measurement(self, y: ArrayLike) -> tuple[FloatArray, np.ndarray]:
-        """``y`` as ``(B, n_y)`` float64 and the mask of usable rows (``nan_policy``)."""
+    def _measurement(self, y: ArrayLike | None) -> tuple[FloatArray, np.ndarray]:
+        """``y`` as ``(B, n_y)`` float64 and the mask of usable rows (``nan_policy``; ``None``
+        and masked entries are missing whatever the policy)."""
         if type(y) is not np.ndarray or y.dtype is not _F64:
+            if y is None:
+                return self._no_measurement()
+            if isinstance(y, np.ma.MaskedArray):
+                return self._masked_measurement(y)
             y = real_array("y", y)
         if y.shape == self._y_shape:
             Y = y[None] if self._single else y
@@ -420,6 +486,24 @@ class Estimator(ABC):
             raise ValueError("y must be finite (nan_policy='raise'); got NaN or inf in the "
                              "measurement. Pass nan_policy='skip' to treat it as missing.")
         return np.where(valid[:, None], Y, 0.0), valid
+
+    def _no_measurement(self) -> tuple[FloatArray, np.ndarray]:
+        """``step(None)``: no system has a measurement (before the first step: one system, or
+        the batched prior's batch)."""
+        if not self._n_b:
+            self._ensure_batch(self._batch or 1, self._batch is None)
+        return np.zeros((self._n_b, self._n_y)), np.zeros(self._n_b, bool)
+
+    def _masked_measurement(self, y: np.ma.MaskedArray) -> tuple[FloatArray, np.ndarray]:
+        """A masked array: a system with any masked entry has no measurement this step."""
+        mask = np.ma.getmaskarray(y)
+        data = np.array(real_array("y", np.ma.getdata(y)), dtype=np.float64)
+        data[mask] = 0.0
+        Y, valid = self._measurement(data)
+        if not mask.any():
+            return Y, valid
+        missing = mask.reshape(Y.shape).any(axis=1)
+        return Y, valid & ~missing
 
     def _first_measurement(self, y: FloatArray) -> FloatArray:
         """A measurement of a shape not yet seen: the first one (which fixes the batch), a
@@ -465,8 +549,11 @@ class Estimator(ABC):
         self._diverged = np.zeros(n_batch, bool)
         self._nis_run = np.zeros(n_batch, np.int64)
         self._nis = np.full(n_batch, np.nan)
+        #: ``log det S`` of each system's last innovation (NaN where none)
+        self._logdet = np.full(n_batch, np.nan)
         self._fresh = np.zeros(n_batch, bool)
         self._all_valid = np.ones(n_batch, bool)
+        self._last_valid = self._all_valid
         #: ``predict`` masks of the compiled twins: every system, none (the first step)
         self._all_predict = np.ones(n_batch, bool)
         self._none_predict = np.zeros(n_batch, bool)
@@ -475,12 +562,17 @@ class Estimator(ABC):
 
     def _predicting(self) -> np.ndarray:
         """The systems that predict this step (the compiled twins' ``predict`` mask)."""
-        if self._k == 0:
+        if self._update_next:
             return self._none_predict
         return ~self._fresh if self._restarting else self._all_predict
 
     def _out(self, a: FloatArray) -> FloatArray:
         return a[0].copy() if self._single else a.copy()
+
+
+def _four(out: StepResult) -> tuple[Any, Any, Any, Any]:
+    """A numpy hook's ``(x, P, nis)`` or ``(x, P, nis, log det S)`` as four items."""
+    return (out[0], out[1], out[2], out[3] if len(out) > 3 else None)
 
 
 def _owned(a: FloatArray) -> FloatArray:

@@ -286,7 +286,7 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
         self._broken: np.ndarray | None = None
         self._condition: FloatArray | None = None
 
-    def step(self, y: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+    def step(self, y: ArrayLike | None, u: ArrayLike | None = None) -> FloatArray:
         """As :meth:`Estimator.step`; a global-recursion breakdown also sets ``diverged``."""
         x = super().step(y, u)
         if self._broken is not None and self._broken.any():

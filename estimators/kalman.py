@@ -24,13 +24,24 @@ from typing import Any, NamedTuple, Protocol, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kalman_linalg import constant_or_batch, eye, mul_t, rmul, spd_inverse, symmetrize
+from ._kalman_linalg import (
+    constant_or_batch,
+    eye,
+    logdet_of_inverse,
+    mul_t,
+    rmul,
+    spd_inverse,
+    symmetrize,
+)
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
 from .errors import needs_linear
 from .model import StateSpaceModel, SystemMatrices
+from .public_steps import PublicSteps
 from .registry import register_estimator
+from .sequences import SmootherResult
+from .smoothers import smooth_sequence
 
 __all__ = ["Innovation", "KalmanFilter", "kf_predict", "kf_update"]
 
@@ -216,7 +227,7 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
 
 
 # ---------------------------------------------------------------------------- filters
-class KalmanFilter(Estimator):
+class KalmanFilter(PublicSteps, Estimator):
     """Linear Kalman filter on a :class:`LinearModel` or :class:`TimeVaryingLinearModel`.
 
     Convention for time-varying models (docs/architecture.md#time-varying-models): the prediction
@@ -246,17 +257,27 @@ class KalmanFilter(Estimator):
 
     name = "kf"
     has_compiled_step = True
+    reports_likelihood = True
+    model_reassignable = True
+    per_call_H = "C"
     twin_replaces = (*Estimator.twin_replaces, "_correct", "_matrices")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
+        self._bind(model)
+        super().__init__(model, x0=x0, P0=P0, **options)
+
+    def _bind(self, model: StateSpaceModel) -> None:
         if not getattr(model, "is_linear", False) or not hasattr(model, "matrices"):
             raise needs_linear(type(self).__name__, model,
                                "'ekf' (ExtendedKalmanFilter) or 'ukf' (UnscentedKalmanFilter)")
         self._constant = bool(getattr(model, "time_invariant", True))
         if self._constant:
             self._mats = self._prepare(model.matrices(0))
-        super().__init__(model, x0=x0, P0=P0, **options)
+
+    def _model_changed(self) -> None:
+        self._bind(self.model)
+        self._gains = LinearGains(self.model.n_x, self.model.n_y, self._constant)
 
     @staticmethod
     def _prepare(mats: Any) -> StepMatrices:
@@ -287,11 +308,13 @@ class KalmanFilter(Estimator):
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return self._correct(x, P, y, valid, self._matrices(0))[:3]
+                ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        x, P, nis, _, W = self._correct(x, P, y, valid, self._matrices(self._k))
+        return x, P, nis, logdet_of_inverse(W, x.shape[0])
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray
+                        ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         A, B, _, Qd, _ = self._matrices(self._k - 1)
         x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
         every = valid is self._all_valid and not self._restarting
@@ -300,7 +323,7 @@ class KalmanFilter(Estimator):
             K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
             x, nis = correct(x, y - x @ self._mats.C.T, K, W)
             gains.regime[0] = int(bool(np.isfinite(x).all()))
-            return x, P, nis
+            return x, P, nis, logdet_of_inverse(W, x.shape[0])
         gains.regime[0] = 0
         mats = self._matrices(self._k)
         x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
@@ -310,26 +333,39 @@ class KalmanFilter(Estimator):
             gains.regime[0] = 1
             gains.K = np.ascontiguousarray(K.transpose(1, 2, 0))
             gains.W = np.ascontiguousarray(W.transpose(1, 2, 0))
-        return x_new, P_new, nis
+        return x_new, P_new, nis, logdet_of_inverse(W, x.shape[0])
 
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
                  mats: StepMatrices) -> tuple[Any, ...]:
         """The update ``(x⁺, P⁺, nis, K, S⁻¹)``; a shared ``P`` is split where some system has
-        no usable measurement (``K`` and ``S⁻¹`` are then not returned)."""
+        no usable measurement (``K`` is then not returned)."""
         C, R = mats.C, mats.R
         e = y - x @ C.T
         if valid is not self._all_valid:
             if P.shape[0] != x.shape[0]:
                 P = np.repeat(P, x.shape[0], axis=0)
-            x_new, P_new, _, nis = update_kernel(x, P, e, C, R, valid)
-            return x_new, P_new, nis, None, None
+            x_new, P_new, W, nis = update_kernel(x, P, e, C, R, valid)
+            return x_new, P_new, nis, None, W
         K, W, P_new = gain_kernel(P, C, R)
         x_new, nis = correct(x, e, K, W)
         return x_new, P_new, nis, K, W
 
+    # ------------------------------------------------------------------ smoother
+    def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
+        """Rauch–Tung–Striebel smoother over a whole sequence (:mod:`.smoothers`): a
+        forward :meth:`filter` (same arguments and alignment), then the backward pass with
+        ``A, B, G Q Gᵀ`` of ``model.matrices(k)``. Returns a
+        :class:`~fir_gym.estimators.sequences.SmootherResult` (``x``, ``P``, ``filtered``)."""
+        return smooth_sequence(self, ys, us, self._smoother_prediction)
+
+    def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
+                             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        A, B, _, Qd, _ = self._matrices(k)
+        return x @ A.T + u @ B.T, predict_covariance(P, A, Qd), P @ A.T
+
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
-        mats = self._matrices(0)
+        mats = self._matrices(self._k)
         self._gains.step(self, mats, mats, self._no_input, y, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
@@ -368,7 +404,7 @@ class LinearGains:
         compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
                                     prediction.Qd, update.R, y, valid, flt._predicting(),
                                     self.K, self.W, self.regime, flt._diverged, flt._nis_run,
-                                    flt._nis, flt._limits)
+                                    flt._nis, flt._limits, flt._logdet)
 
 
 class _Scheduled(Protocol):

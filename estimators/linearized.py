@@ -9,16 +9,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kalman_linalg import logdet_of_inverse
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import kalman as compiled_kalman
 from .kalman import predict_kernel, update_kernel
+from .public_steps import PublicSteps
 from .registry import register_estimator
 
 __all__ = ["LinearizedKalmanFilter"]
 
 
-class LinearizedKalmanFilter(Estimator):
+class LinearizedKalmanFilter(PublicSteps, Estimator):
     """Paper 000's linearised Kalman filter (LKF): a KF on the perturbation about a nominal path.
 
     The nominal trajectory starts at the filter's initial state and runs open
@@ -37,6 +39,8 @@ class LinearizedKalmanFilter(Estimator):
 
     name = "lkf"
     has_compiled_step = True
+    reports_likelihood = True
+    model_reassignable = True
 
     _x_nom: FloatArray
 
@@ -45,15 +49,18 @@ class LinearizedKalmanFilter(Estimator):
 
     def _reset_state(self) -> None:
         self._x_nom = np.empty((0, self.model.n_x))
+        self._model_changed()
+
+    def _model_changed(self) -> None:
         self._GQGt = self.model.GQGT
         self._R_batch = self.model.R[None]
 
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                ) -> tuple[FloatArray, ...]:
         return self._correct(x - self._x_nom, P, y, valid)
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray) -> tuple[FloatArray, ...]:
         model = self.model
         F = model.F(self._x_nom, u)
         dx, P = predict_kernel(x - self._x_nom, P, F, self._GQGt)
@@ -61,18 +68,18 @@ class LinearizedKalmanFilter(Estimator):
         return self._correct(dx, P, y, valid)
 
     def _update_systems(self, idx: np.ndarray, x: FloatArray, P: FloatArray, y: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray) -> tuple[FloatArray, ...]:
         # a restarted system's nominal path starts again at its prior
         self._x_nom[idx] = x
         return self._correct(np.zeros_like(x), P, y, valid, self._x_nom[idx])
 
     def _correct(self, dx: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
-                 x_nom: FloatArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+                 x_nom: FloatArray | None = None) -> tuple[FloatArray, ...]:
         x_nom = self._x_nom if x_nom is None else x_nom
         H = self.model.H(x_nom)
         e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
-        dx, P, _, nis = update_kernel(dx, P, e, H, self.model.R, valid)
-        return x_nom + dx, P, nis
+        dx, P, W, nis = update_kernel(dx, P, e, H, self.model.R, valid)
+        return x_nom + dx, P, nis, logdet_of_inverse(W, dx.shape[0])
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         self._compiled_step(y, self._no_input, valid, predict=False)
@@ -100,7 +107,8 @@ class LinearizedKalmanFilter(Estimator):
             hx = model.h(nom_next) + (H @ (xp - nom_next)[:, :, None])[:, :, 0]
         compiled_kalman.predict_update(x, self._P, xp, F, self._GQGt, y, hx, H,
                                        self._R_batch, valid, self._predicting(),
-                                       self._diverged, self._nis_run, self._nis, self._limits)
+                                       self._diverged, self._nis_run, self._nis, self._limits,
+                                       self._logdet)
 
     @property
     def x_nominal(self) -> FloatArray | None:

@@ -28,6 +28,12 @@ from ._validation import FloatArray, as_batch, as_covariance, as_matrix, input_b
 Dynamics = Callable[[FloatArray, FloatArray], FloatArray]
 _Model = TypeVar("_Model", bound="StateSpaceModel")
 Output = Callable[[FloatArray], FloatArray]
+#: ``residual(a, b) -> a − b`` on batched states or measurements
+Residual = Callable[[FloatArray, FloatArray], FloatArray]
+#: ``mean(points (B, N, k), weights (N,)) -> (B, k)``
+WeightedMean = Callable[[FloatArray, FloatArray], FloatArray]
+#: the optional residual and mean hooks of a model (filterpy's names)
+HOOKS = ("residual_x", "residual_y", "mean_x", "mean_y")
 
 #: Relative step of the central finite differences, ``eps**(1/3)``: it balances
 #: truncation error O(h²) against round-off O(eps/h) for a smooth function.
@@ -101,6 +107,14 @@ class StateSpaceModel(_ModelCore):
         fF: optional ``fF(x, u) -> (f(x, u), F(x, u))`` computed together, for plants
             whose transition is an integrator that yields its Jacobian in the same
             pass (see :meth:`linearize`).
+        residual_x, residual_y: optional batched differences ``residual(a, b) -> a − b``
+            of states and of measurements (filterpy's names), for quantities that are not
+            plain vectors: e.g. wrapping a bearing into ``[−π, π)``. Used by the EKF (the
+            innovation), the UKF (every deviation from a mean) and their smoothers.
+        mean_x, mean_y: optional weighted means ``mean(points (B, N, k), weights (N,)) ->
+            (B, k)`` of sigma points (e.g. a circular mean of angles), used by the UKF and
+            its smoother instead of ``Σ Wᵢ χᵢ``. A UKF on a model with any of the four
+            runs on the numpy reference (the compiled twin does its sums in its own loop).
 
     ``n_x`` is inferred from ``G`` (its rows) or from ``Q`` when ``G`` is absent;
     ``n_y`` from ``R``. The state noise covariance is ``G Q Gᵀ``
@@ -123,14 +137,28 @@ class StateSpaceModel(_ModelCore):
         n_u: int = 0,
         name: str | None = None,
         fF: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]] | None = None,
+        residual_x: Residual | None = None,
+        residual_y: Residual | None = None,
+        mean_x: WeightedMean | None = None,
+        mean_y: WeightedMean | None = None,
     ) -> None:
-        self._set_core(required={"f": f, "h": h}, optional={"F": F, "H": H, "fF": fF},
+        hooks = {"residual_x": residual_x, "residual_y": residual_y, "mean_x": mean_x,
+                 "mean_y": mean_y}
+        self._set_core(required={"f": f, "h": h},
+                       optional={"F": F, "H": H, "fF": fF, **hooks},
                        Q=Q, R=R, G=G, n_u=n_u, dt=dt, name=name)
         self._f = f
         self._h = h
         self._F = F
         self._H = H
         self._fF = fF
+        self.residual_x, self.residual_y = residual_x, residual_y
+        self.mean_x, self.mean_y = mean_x, mean_y
+
+    @property
+    def has_hooks(self) -> bool:
+        """Whether any of ``residual_x, residual_y, mean_x, mean_y`` is set."""
+        return any(getattr(self, a, None) is not None for a in HOOKS)
 
     # ------------------------------------------------------------------ callables
     def f(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
@@ -210,7 +238,7 @@ class StateSpaceModel(_ModelCore):
     def _constructor_kwargs(self) -> dict[str, Any]:
         return {"f": self._f, "h": self._h, "Q": self.Q, "R": self.R, "dt": self.dt,
                 "F": self._F, "H": self._H, "G": self.G, "n_u": self.n_u, "name": self.name,
-                "fF": self._fF}
+                "fF": self._fF, **{a: getattr(self, a) for a in HOOKS}}
 
 
 class SystemMatrices(NamedTuple):

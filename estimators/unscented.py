@@ -42,13 +42,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kalman_linalg import cholesky, rmul, spd_inverse, symmetrize
+from ._batched_check import check_model_batched
+from ._hooked_moments import hooked_cross, hooked_moments
+from ._kalman_linalg import cholesky, logdet_of_inverse, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
 from .extended import model_callables
 from .model import StateSpaceModel
+from .public_steps import PublicSteps
 from .registry import register_estimator
+from .sequences import SmootherResult
+from .smoothers import smooth_sequence
 
 __all__ = ["CubatureSigmaPoints", "MerweScaledSigmaPoints", "SigmaPoints",
            "UnscentedKalmanFilter", "matrix_sqrt", "unscented_transform"]
@@ -235,7 +240,7 @@ def unscented_transform(Z: ArrayLike, Wm: ArrayLike | SigmaPoints, Wc: ArrayLike
     return (mean[0], P[0]) if single else (mean, P)
 
 
-class UnscentedKalmanFilter(Estimator):
+class UnscentedKalmanFilter(PublicSteps, Estimator):
     """Unscented Kalman filter for additive noise (paper 003, Table 2, corrected; batched).
 
     predict: ``χ = points(x, P)``, ``x⁻, P⁻ = UT(f(χ, u)) + G Q Gᵀ``;
@@ -261,6 +266,8 @@ class UnscentedKalmanFilter(Estimator):
 
     name = "ukf"
     has_compiled_step = True
+    reports_likelihood = True
+    model_reassignable = True
     twin_replaces = (*Estimator.twin_replaces, "_draw", "_correct")
 
     def __init__(self, model: StateSpaceModel, *, x0: ArrayLike | None = None,
@@ -272,18 +279,51 @@ class UnscentedKalmanFilter(Estimator):
                             f"{type(model).__name__} (use KalmanFilter)")
         if points is None:
             points = MerweScaledSigmaPoints(getattr(model, "n_x", 1), alpha, beta, kappa)
+        self._n_x = getattr(model, "n_x", None)
+        self.points, self.redraw, self.jitter = points, bool(redraw), jitter
+        super().__init__(model, x0=x0, P0=P0, **options)
+        self._model_changed()
+
+    @property
+    def points(self) -> SigmaPoints:
+        """The sigma-point scheme (assignable: the next step uses it)."""
+        return self._points
+
+    @points.setter
+    def points(self, points: SigmaPoints) -> None:
         if not isinstance(points, SigmaPoints):
             raise TypeError(f"points must be a SigmaPoints instance; got {type(points).__name__}")
-        if isinstance(model, StateSpaceModel) and points.n != model.n_x:
-            raise ValueError(f"points must be for n = {model.n_x} (the model's n_x); "
+        if self._n_x is not None and points.n != self._n_x:
+            raise ValueError(f"points must be for n = {self._n_x} (the model's n_x); "
                              f"got n = {points.n}")
+        self._points = points
+        if getattr(self, "_n_b", 0):
+            self._init_batch(self._n_b)
+
+    @property
+    def jitter(self) -> float:
+        """Relative diagonal loading before each factorisation (assignable)."""
+        return self._jitter
+
+    @jitter.setter
+    def jitter(self, jitter: float) -> None:
         if not np.isfinite(jitter) or jitter < 0:
             raise ValueError(f"jitter must be a non-negative number; got {jitter!r}")
-        self.points, self.redraw, self.jitter = points, bool(redraw), float(jitter)
-        super().__init__(model, x0=x0, P0=P0, **options)
+        self._jitter = float(jitter)
+
+    def _model_changed(self) -> None:
+        model = self.model
+        if getattr(model, "time_invariant", True) is False:
+            raise TypeError(f"model must have time-free f/h for {type(self).__name__}")
         self._f, _, self._h, _ = model_callables(model)
+        check_model_batched(self)
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R = np.ascontiguousarray(model.R)
+        #: the model's residual and mean hooks (all None for a plain model)
+        self._hooks = tuple(getattr(model, a, None) for a in
+                            ("residual_x", "residual_y", "mean_x", "mean_y"))
+        #: the twin's sums know no hooks: a hooked model steps on the numpy reference
+        self._hooked = any(h is not None for h in self._hooks)
 
     def _init_batch(self, n_batch: int) -> None:
         #: the input of every sigma point when the caller gives none
@@ -294,34 +334,45 @@ class UnscentedKalmanFilter(Estimator):
         return self.points.points(x, matrix_sqrt(P, self.jitter))
 
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                ) -> tuple[FloatArray, ...]:
         return self._correct(x, P, self._draw(x, P), y, valid)
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
-                        valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                        valid: np.ndarray) -> tuple[FloatArray, ...]:
         n_b, n = x.shape
         N = self.points.num_points
         X = self._draw(x, P)
         U = np.repeat(u, N, axis=0)
         Xf = self._f(X.reshape(n_b * N, n), U).reshape(n_b, N, n)
-        x_pred, P_pred = _mean_covariance(Xf, self.points)
+        if self._hooks[0] is not None or self._hooks[2] is not None:
+            x_pred, D = hooked_moments(Xf, self.points.Wm, self._hooks[2], self._hooks[0])
+            P_pred = symmetrize(hooked_cross(D, D, self.points.Wc))
+        else:
+            x_pred, P_pred = _mean_covariance(Xf, self.points)
         P_pred = P_pred + self._GQGt
         X_pred = self._draw(x_pred, P_pred) if self.redraw else Xf
         return self._correct(x_pred, P_pred, X_pred, y, valid)
 
     def _correct(self, x: FloatArray, P: FloatArray, X: FloatArray, y: FloatArray,
-                 valid: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+                 valid: np.ndarray) -> tuple[FloatArray, ...]:
         n_b, N, n = X.shape
         sp = self.points
         Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
-        y_hat, DZ, dz, cz = _moments(Z, sp)
-        _, DX, dx, cx = _moments(X, sp)
-        S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
-        Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
+        res_x, res_y, _, mean_y = self._hooks
+        if self._hooked:                               # textbook sums through the hooks
+            y_hat, DZ = hooked_moments(Z, sp.Wm, mean_y, res_y)
+            DX = X - x[:, None] if res_x is None else res_x(X, x[:, None])
+            S = symmetrize(hooked_cross(DZ, DZ, sp.Wc))
+            Pxz = hooked_cross(DX, DZ, sp.Wc)
+        else:
+            y_hat, DZ, dz, cz = _moments(Z, sp)
+            _, DX, dx, cx = _moments(X, sp)
+            S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, sp))
+            Pxz = _cross(DX, dx, cx, DZ, dz, cz, sp)
         S = S + self.model.R
         W = spd_inverse(S)
         K = Pxz @ W
-        e = y - y_hat
+        e = y - y_hat if res_y is None else res_y(y, y_hat)
         x_new = x + (K @ e[:, :, None])[:, :, 0]
         P_new = symmetrize(P - K @ Pxz.mT)
         nis = ((W @ e[:, :, None])[:, :, 0] * e).sum(axis=1)
@@ -329,11 +380,41 @@ class UnscentedKalmanFilter(Estimator):
             x_new = np.where(valid[:, None], x_new, x)
             P_new = np.where(valid[:, None, None], P_new, P)
             nis = np.where(valid, nis, np.nan)
-        return x_new, P_new, nis
+        return x_new, P_new, nis, logdet_of_inverse(W, n_b)
 
+
+    # ------------------------------------------------------------------ smoother
+    def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
+        """Unscented Rauch–Tung–Striebel smoother (Särkkä 2008; :mod:`.smoothers`): a forward
+        :meth:`filter` (same arguments and alignment), then the backward pass with the
+        unscented transform of ``f`` at each filtered estimate (this filter's sigma points)
+        and the cross-covariance ``C = Σ Wᶜ (χᵢ − x̂)(f(χᵢ) − x⁻)ᵀ``. Returns a
+        :class:`~fir_gym.estimators.sequences.SmootherResult`."""
+        return smooth_sequence(self, ys, us, self._smoother_prediction, self._hooks[0])
+
+    def _smoother_prediction(self, k: int, x: FloatArray, P: FloatArray, u: FloatArray
+                             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        n_b, n = x.shape
+        sp = self.points
+        N = sp.num_points
+        X = self._draw(x, P)
+        Xf = self._f(X.reshape(n_b * N, n), np.repeat(u, N, axis=0)).reshape(n_b, N, n)
+        res_x, _, mean_x, _ = self._hooks
+        if res_x is not None or mean_x is not None:
+            x_pred, DF = hooked_moments(Xf, sp.Wm, mean_x, res_x)
+            DX = X - x[:, None] if res_x is None else res_x(X, x[:, None])
+            P_pred = symmetrize(hooked_cross(DF, DF, sp.Wc)) + self._GQGt
+            return x_pred, P_pred, hooked_cross(DX, DF, sp.Wc)
+        x_pred, DF, df, cf = _moments(Xf, sp)
+        _, DX, dx, cx = _moments(X, sp)
+        P_pred = symmetrize(_cross(DF, df, cf, DF, df, cf, sp)) + self._GQGt
+        return x_pred, P_pred, _cross(DX, dx, cx, DF, df, cf, sp)
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
+        if self._hooked:
+            self._numpy_step(y, self._no_input, valid)
+            return
         x, P, sp = self._x, self._P, self.points
         assert x is not None and P is not None
         X = compiled_unscented.sigma_points(x, P, sp.xi, self.jitter)
@@ -341,6 +422,9 @@ class UnscentedKalmanFilter(Estimator):
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
+        if self._hooked:
+            self._numpy_step(y, u, valid)
+            return
         x, P, sp = self._x, self._P, self.points
         assert x is not None and P is not None
         n_b, n = x.shape
@@ -362,7 +446,7 @@ class UnscentedKalmanFilter(Estimator):
             Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
         compiled_unscented.update(x, P, X, Z, y, sp.Wm, sp.Wc, self._R, valid, self._x,
                                   self._P, self._diverged, self._nis_run, self._nis,
-                                  self._limits)
+                                  self._limits, self._logdet)
 
 
 register_estimator("ukf", UnscentedKalmanFilter)

@@ -19,6 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from plant_cases import applicable
 
 import fir_gym
 from fir_gym.estimators import estimator_class
@@ -41,20 +42,6 @@ def same(a: Any, b: Any) -> bool:
         return a_.dtype == b_.dtype and a_.shape == b_.shape and bool(
             np.array_equal(a_.view(np.uint8), b_.view(np.uint8)))
     return bool(a == b)
-
-
-def applicable() -> list[tuple[str, str]]:
-    """(plant id, estimator name) of every registered estimator that accepts the plant."""
-    from fir_gym.benchmarks.estimators import _applicable
-
-    cases = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for env_id in fir_gym.ENV_IDS:
-            env = gym.make(env_id)
-            cases += [(env_id, name) for name, _, _ in _applicable(env)]
-            env.close()
-    return cases
 
 
 CASES = applicable()

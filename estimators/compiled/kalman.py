@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
-from .linalg import CHUNK, load, mul, spd_inverse, symmetrize_sum
+from .linalg import CHUNK, load, logdet_of_inverse, mul, spd_inverse, symmetrize_sum
 from .watch import verdict
 
 EPS = float(np.finfo(np.float64).eps)
@@ -101,14 +101,16 @@ def gain_block(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, nb: int, PHt: np.
 def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
            ok: np.ndarray, K: np.ndarray, W: np.ndarray, Pm: np.ndarray, Pp: np.ndarray,
            c0: int, shared: bool, store_P: bool, x: np.ndarray, P: np.ndarray,
-           diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray
-           ) -> bool:
+           diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray,
+           logdet: np.ndarray) -> bool:
     """The state half of the update and the watch for systems ``b0 .. b0+nb``: ``x⁺ = x⁻ + K
     e`` and ``NIS = eᵀ W e`` (``W = S⁻¹``), then ``x⁺`` and ``P⁺ = Pp`` (``P⁻ = Pm`` without a
     usable measurement) stored into ``x`` (and ``P`` with ``store_P``) where both are
     finite. Column ``t`` of the blocks ``Xm (n, ·)`` (``x⁻``) and ``E (m, ·)`` (innovations)
     belongs to system ``b0 + t``; of ``ok``, ``K``, ``W``, ``Pm``, ``Pp`` column ``c0 + t`` (``0``
-    for all where ``shared``). Returns whether every estimate was stored."""
+    for all where ``shared``). ``logdet[b]`` receives ``log det S`` (NaN without a usable
+    measurement), for the innovation's log-likelihood. Returns whether every estimate was
+    stored."""
     n, m = Xm.shape[0], E.shape[0]
     nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
     xn = np.empty(n)
@@ -117,6 +119,7 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
         b, col = b0 + t, 0 if shared else c0 + t
         usable = valid[b]                            # no measurement: keep x⁻, P⁻
         q = np.nan
+        logdet[b] = logdet_of_inverse(W, col) if usable and ok[col] else np.nan
         for i in range(n):
             xn[i] = Xm[i, t]
         if usable and ok[col]:
@@ -158,10 +161,11 @@ def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
                    Q: np.ndarray, y: np.ndarray, hx: np.ndarray, H: np.ndarray,
                    R: np.ndarray, valid: np.ndarray, predict: np.ndarray,
                    diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray,
-                   limits: np.ndarray) -> None:
+                   limits: np.ndarray, logdet: np.ndarray) -> None:
     """One step of every system, in place: ``x⁻ = xp`` (the caller's ``f(x, u)``; ``x`` itself
     where ``predict`` is False), ``P⁻ = F P Fᵀ + Q`` where ``predict``, the update with
-    ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then the watch."""
+    ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then the watch (``logdet``: each
+    system's ``log det S``)."""
     n_b, n = x.shape
     m = y.shape[1]
     if not (P.shape[0] == xp.shape[0] == y.shape[0] == hx.shape[0] == valid.shape[0]
@@ -193,7 +197,7 @@ def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
             for i in range(m):
                 E[i, t] = y[b0 + t, i] - hx[b0 + t, i]
         finish(b0, nb, Xm, E, valid, ok, K, W, Pm, U, 0, False, True, x, P, diverged,
-               nis_run, nis, limits)
+               nis_run, nis, limits, logdet)
 
 
 @jit
@@ -201,7 +205,8 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                 C: np.ndarray, Q: np.ndarray, R: np.ndarray, y: np.ndarray,
                 valid: np.ndarray, predict: np.ndarray, gain_K: np.ndarray,
                 gain_W: np.ndarray, regime: np.ndarray, diverged: np.ndarray,
-                nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray) -> None:
+                nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray, logdet: np.ndarray
+                ) -> None:
     """One step of a linear model's filter, in place: ``x⁻ = A x + B u`` (``u (B | 1, n_u)``)
     and ``P⁻ = A P Aᵀ + Q`` where ``predict``, the update with ``e = y − C x⁻``, the watch.
 
@@ -282,7 +287,8 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                 v += C[i, k] * Xm[k, b]
             E[i, b] = y[b, i] - v
     repaired = not finish(0, n_b, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, 0,
-                          shared, not (shared or steady), x, P, diverged, nis_run, nis, limits)
+                          shared, not (shared or steady), x, P, diverged, nis_run, nis, limits,
+                          logdet)
     if shared and not steady:                        # one covariance, stored where finite
         finite = ok_all[0]
         for i in range(n):

@@ -125,3 +125,33 @@ def spd_inverse(S: np.ndarray, W: np.ndarray, L: np.ndarray, ok: np.ndarray, nb:
                 for k in range(i + 1, m):
                     c -= L[k, i, t] * W[k, col, t]
                 W[i, col, t] = c / L[i, i, t]
+
+
+@jit
+def logdet_of_inverse(W: np.ndarray, col: int) -> float:
+    """``log det S`` from ``W = S⁻¹`` (block column ``col``, symmetric positive definite):
+    ``−log det W``, closed form for m <= 2, else ``−2 Σ log Lᵢᵢ`` of W's Cholesky factor;
+    NaN where W is not positive definite."""
+    m = W.shape[0]
+    if m == 1:
+        return -np.log(W[0, 0, col]) if W[0, 0, col] > 0.0 else np.nan
+    if m == 2:
+        a, b, d = W[0, 0, col], 0.5 * (W[0, 1, col] + W[1, 0, col]), W[1, 1, col]
+        det = a * d - b * b
+        return -np.log(det) if a > 0.0 and det > 0.0 else np.nan
+    L = np.zeros((m, m))
+    total = 0.0
+    for j in range(m):
+        d = W[j, j, col]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return np.nan
+        L[j, j] = np.sqrt(d)
+        total += np.log(L[j, j])
+        for i in range(j + 1, m):
+            c = 0.5 * (W[i, j, col] + W[j, i, col])
+            for k in range(j):
+                c -= L[i, k] * L[j, k]
+            L[i, j] = c / L[j, j]
+    return -2.0 * total

@@ -201,7 +201,7 @@ def predict(X: np.ndarray, Xf: np.ndarray, x: np.ndarray, P: np.ndarray, Wm: np.
 def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
            y: np.ndarray, Wm: np.ndarray, Wc: np.ndarray, R: np.ndarray, valid: np.ndarray,
            x: np.ndarray, P: np.ndarray, diverged: np.ndarray, nis_run: np.ndarray,
-           nis: np.ndarray, limits: np.ndarray) -> None:
+           nis: np.ndarray, limits: np.ndarray, logdet: np.ndarray) -> None:
     """The measurement update of every system from its points ``X (B, N, n)`` and ``Z = h(X)``,
     then the watch, written into ``x``, ``P`` (which may be ``x_pred``, ``P_pred``)."""
     n_b, _, n = X.shape
@@ -249,4 +249,4 @@ def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
             for i in range(m):
                 E[i, t] = y[b, i] - y_hat[b, i]
         finish(b0, nb, Xm, E, valid, ok, K, Ws, Pm, Pp, 0, False, True, x, P, diverged,
-               nis_run, nis, limits)
+               nis_run, nis, limits, logdet)

@@ -73,7 +73,7 @@ def trivial_ekf_kernel(n_batch: int) -> Any:
     y = np.zeros((n_batch, 1))
     args = (x, ekf._P, x.copy(), one, ekf._GQGt, y, x.copy(), one, ekf._R_batch,
             ekf._all_valid, ekf._all_predict, ekf._diverged, ekf._nis_run, ekf._nis,
-            ekf._limits)
+            ekf._limits, ekf._logdet)
     return lambda: kalman.predict_update(*args)
 
 

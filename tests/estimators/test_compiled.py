@@ -70,7 +70,9 @@ def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, share
     predict = rng.uniform(size=B) > 0.1            # some systems take their first step
     xs, Ps = x.copy(), P.copy()
     diverged, run, nis = watch_state(B)
-    ck.predict_update(xs, Ps, x, F, Q, y, hx, H, R, valid, predict, diverged, run, nis, LIMITS)
+    logdet = np.empty(B)
+    ck.predict_update(xs, Ps, x, F, Q, y, hx, H, R, valid, predict, diverged, run, nis, LIMITS,
+                      logdet)
     P_pred = np.where(predict[:, None, None], predict_covariance(P, F[0] if shared else F, Q),
                       P)
     want = update_kernel(x, P_pred, y - hx, H[0] if shared else H, R[0] if shared else R,
@@ -78,6 +80,11 @@ def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, share
     for a, b in zip((xs, Ps, nis), (want[0], want[1], want[3]), strict=True):
         close(a, b, np.nanmax(np.abs(b)))
     assert np.isnan(nis[~valid]).all() and np.isfinite(nis[valid]).all()
+    H_all = np.broadcast_to(H, (B, m, n))
+    S = H_all @ P_pred @ H_all.mT + np.broadcast_to(R, (B, m, m))
+    sign, want_logdet = np.linalg.slogdet(S)               # log det S, by LU: independent
+    assert (sign[valid] > 0).all() and np.isnan(logdet[~valid]).all()
+    np.testing.assert_allclose(logdet[valid], want_logdet[valid], rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(xs[~valid], x[~valid])
     np.testing.assert_array_equal(Ps, Ps.swapaxes(1, 2))                 # symmetric exactly
     assert not diverged.any() and not run.any()
@@ -98,7 +105,7 @@ def test_predict_update_keeps_the_estimate_and_flags_where_S_is_not_positive_def
     xs, Ps = x.copy(), P.copy()
     diverged, run, nis = watch_state(B)
     ck.predict_update(xs, Ps, x, F, np.zeros((n, n)), y, np.zeros((B, m)), H, R, valid,
-                      predict, diverged, run, nis, LIMITS)
+                      predict, diverged, run, nis, LIMITS, np.empty(B))
     with np.errstate(invalid="ignore", divide="ignore"):
         ref = update_kernel(x, predict_covariance(P, F[0], np.zeros((n, n))), y, H[0], R,
                             valid)

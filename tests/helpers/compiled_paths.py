@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -36,3 +37,9 @@ def step_on(flt: Any, twin: bool, y: Any, u: Any = None) -> Any:
         return flt.step(y, u)
     with numpy_path():
         return flt.step(y, u)
+
+
+def on_path(path: str) -> Any:
+    """A block on ``path``: ``"numpy"`` (the references) or ``"compiled"`` (the dispatch rule
+    as it is)."""
+    return numpy_path() if path == "numpy" else contextlib.nullcontext()

@@ -1,0 +1,99 @@
+"""The attributes of an estimator that a user may assign, and what assigning them does.
+
+Every public attribute either takes effect at the next step or refuses the assignment
+with an error that says what to do (no silent traps): ``model`` on the Kalman family
+(``model_reassignable``; the filter rebuilds what it derived from it in
+``_model_changed``), refused on the filters that precompute gains from it;
+``nan_policy``, ``nis_patience`` and ``max_covariance_trace`` validated and live (the
+latter two are the compiled watch's ``_limits``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from ._validation import one_of, positive
+from .model import StateSpaceModel
+
+__all__ = ["NAN_POLICIES", "LiveAttributes"]
+
+NAN_POLICIES = ("raise", "skip")
+
+
+class LiveAttributes:
+    """Mixin of :class:`~fir_gym.estimators.base.Estimator`: its assignable attributes."""
+
+    #: whether ``est.model = new_model`` takes effect (the class rebuilds what it derived from
+    #: the model in :meth:`_model_changed`); otherwise assignment is refused
+    model_reassignable: ClassVar[bool] = False
+
+    if TYPE_CHECKING:
+        _limits: np.ndarray
+        _nan_policy: str
+
+    @property
+    def model(self) -> StateSpaceModel:
+        """The filter's model. Assigning a new one of the same sizes (``n_x, n_y, n_u``) takes
+        effect at the next step on the Kalman family (``model_reassignable``), the state and
+        covariance kept — e.g. ``kf.model = kf.model.replace(R=2 * kf.model.R)``; the other
+        filters, which precompute gains from their model, refuse it with an error."""
+        return self._filter_model
+
+    @model.setter
+    def model(self, model: StateSpaceModel) -> None:
+        if "_filter_model" not in self.__dict__ or model is self._filter_model:
+            self._filter_model: StateSpaceModel = model    # the constructor's assignment
+            return
+        name = type(self).__name__
+        if not self.model_reassignable:
+            raise AttributeError(f"{name}.model cannot be reassigned: the filter precomputes "
+                                 f"its gains from the model. Build a new {name} from the new "
+                                 f"model instead")
+        if not isinstance(model, StateSpaceModel):
+            raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
+        old = self._filter_model
+        sizes = ("n_x", "n_y", "n_u")
+        if any(getattr(model, a) != getattr(old, a) for a in sizes):
+            raise ValueError(f"model must keep the sizes of {name}'s model "
+                             f"(n_x, n_y, n_u = {tuple(getattr(old, a) for a in sizes)}); "
+                             f"got {tuple(getattr(model, a) for a in sizes)}: build a new filter")
+        self._filter_model = model
+        try:
+            self._model_changed()
+        except Exception:
+            self._filter_model = old
+            self._model_changed()
+            raise
+
+    def _model_changed(self) -> None:
+        """Hook: rebuild what the filter derived from ``self.model`` (a new one was assigned)."""
+
+    @property
+    def max_covariance_trace(self) -> float:
+        """Divergence limit on ``trace(P)`` (assignable)."""
+        return float(self._limits[2])
+
+    @max_covariance_trace.setter
+    def max_covariance_trace(self, value: float) -> None:
+        self._limits[2] = positive("max_covariance_trace", value)
+
+    @property
+    def nis_patience(self) -> int:
+        """Consecutive high-NIS steps that flag divergence (assignable)."""
+        return int(self._limits[1])
+
+    @nis_patience.setter
+    def nis_patience(self, value: int) -> None:
+        self._limits[1] = float(positive("nis_patience", value, integer=True))
+
+    @property
+    def nan_policy(self) -> str:
+        """``"raise"`` or ``"skip"`` for non-finite measurements (assignable)."""
+        return self._nan_policy
+
+    @nan_policy.setter
+    def nan_policy(self, value: str) -> None:
+        self._nan_policy = one_of("nan_policy", value, NAN_POLICIES)
+
