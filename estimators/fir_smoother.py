@@ -52,6 +52,7 @@ class FIRSmoother(FIRFilter):
 
     name: ClassVar[str] = "fir-smoother"
     _smoother: ClassVar[bool] = True
+    reports_nis: ClassVar[bool] = False
 
     def __init__(self, model: StateSpaceModel, *, horizon: int, gain: str = "two-stage",
                  prior: str | ArrayLike | None = None, x0: ArrayLike | None = None,
