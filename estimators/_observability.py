@@ -47,7 +47,7 @@ def index_along(pairs: Iterable[tuple[ArrayLike, ArrayLike]], R: ArrayLike | Non
             Ri = np.linalg.inv(R_)
         assert Phi is not None and Ri is not None
         H = C_ @ Phi
-        finite = np.isfinite(H).all(axis=(-2, -1))
+        finite = np.asarray(np.isfinite(H).all(axis=(-2, -1)))
         H = np.where(finite[..., None, None], H, 0.0)
         F_m = H.swapaxes(-1, -2) @ Ri @ H
         F = F_m if F is None else F + F_m
