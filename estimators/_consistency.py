@@ -26,6 +26,9 @@ steps is rarer still, whatever the correlation: the false-alarm rate per step is
 most ``nis_tail``. On a nonlinear model (EFIR) the law holds to first order about
 the estimate, as it does for the EKF.
 
+The FIR smoother's estimate lags; its test uses the FIR filter estimate over the same
+window in place of ``x̂[k−1]`` (:class:`~.fir_smoother.FIRSmoother`).
+
 A system taking its first step (after ``reset`` or ``restart``) has no previous
 estimate: its prior ``(x0, P0)`` takes the place of ``(x⁻, P⁻)`` (the Kalman filter's
 first-step NIS). A skipped measurement (``nan_policy="skip"``) has a NaN NIS that does

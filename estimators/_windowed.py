@@ -66,19 +66,28 @@ class WindowedEstimator(Estimator):
         """Push ``y[k]`` (and ``u[k-1]``) into the window and estimate ``x[k]``."""
 
     @abstractmethod
-    def _innovation_terms(self, y: FloatArray, u: FloatArray | None,
-                          predict: np.ndarray) -> InnovationTerms:
-        """The model along the previous estimate ``x̂[k−1]`` (``self._x``): the innovation
-        ``e = y − h(x⁻)`` with ``x⁻ = f(x̂[k−1], u)`` where ``predict`` (else ``x⁻ = x̂``,
-        the prior of a first step), ``A = ∂f/∂x`` at ``x̂[k−1]``, ``Qx = G Q Gᵀ``, ``H = ∂h/∂x``
-        at ``x⁻`` and ``R`` — the arguments of :func:`._consistency.innovation_nis`."""
+    def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
+                          x: FloatArray) -> InnovationTerms:
+        """The model along the previous estimate ``x`` (``x̂[k−1]``): the innovation ``e = y −
+        h(x⁻)`` with ``x⁻ = f(x, u)`` where ``predict`` (else ``x⁻ = x``, the prior of a first
+        step), ``A = ∂f/∂x`` at ``x``, ``Qx = G Q Gᵀ``, ``H = ∂h/∂x`` at ``x⁻`` and ``R`` — the
+        arguments of :func:`._consistency.innovation_nis`."""
 
-    def _innovation_nis(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
-                        ) -> FloatArray:
-        """The numpy reference of the one-step NIS of every system."""
+    def _consistency_prior(self) -> tuple[FloatArray, FloatArray, np.ndarray | None]:
+        """The previous estimate the innovation test predicts from, its covariance, and where
+        it is usable (``None``: everywhere). Default: the filter's own ``x̂``, ``P``."""
+        return self._x, self._P, None
+
+    def _nis_inputs(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
+                    ) -> tuple[FloatArray, ...]:
+        """The arguments of :func:`._consistency.innovation_nis` (and of its twin) for this
+        step; ``self._nis_valid`` becomes the systems whose NIS counts (a measurement, and a
+        usable previous estimate)."""
         predict = self._predicting()
-        e, A, Qx, H, R = self._innovation_terms(y, u, predict)
-        return _consistency.innovation_nis(self._P, A, Qx, H, R, e, predict, valid)
+        x, P, usable = self._consistency_prior()
+        e, A, Qx, H, R = self._innovation_terms(y, u, predict, x)
+        self._nis_valid = valid if usable is None else valid & usable
+        return P, A, Qx, H, R, e, predict, self._nis_valid
 
     def _step_info(self) -> dict[str, Any]:
         return {key: value.copy() if isinstance(value, np.ndarray) else value
@@ -94,7 +103,8 @@ class WindowedEstimator(Estimator):
 
     def _numpy_pass(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        nis = self._innovation_nis(y, u, valid) if self.reports_nis else None
+        nis = _consistency.innovation_nis(*self._nis_inputs(y, u, valid)) \
+            if self.reports_nis else None
         x, P, _ = self._advance(y, u, valid)
         if nis is not None:
             self._last_nis = nis
@@ -102,8 +112,9 @@ class WindowedEstimator(Estimator):
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
-        """The base watch, plus the growth bound: a component beyond ``max_estimate``."""
-        super()._accept(x, P, nis, valid)
+        """The base watch (the NIS counted where it is usable), plus the growth bound: a
+        component beyond ``max_estimate``."""
+        super()._accept(x, P, nis, self._nis_valid if self.reports_nis else valid)
         grown = ~(np.abs(x).max(axis=1) <= self.max_estimate)
         if grown.any():
             self._diverged |= grown
@@ -119,17 +130,16 @@ class WindowedEstimator(Estimator):
         has_nis = self.reports_nis
         with np.errstate(all="ignore"):
             if has_nis:
-                predict = self._predicting()
-                e, A, Qx, H, R = self._innovation_terms(y, u, predict)
+                P_prev, A, Qx, H, R, e, predict, usable = self._nis_inputs(y, u, valid)
                 nis = np.empty(y.shape[0])
-                watch.innovation_nis(self._P, _batch(A), _batch(Qx), _batch(H),
-                                     np.ascontiguousarray(R), np.ascontiguousarray(e),
-                                     predict, valid, nis)
+                watch.innovation_nis(np.ascontiguousarray(P_prev), _batch(A), _batch(Qx),
+                                     _batch(H), np.ascontiguousarray(R),
+                                     np.ascontiguousarray(e), predict, usable, nis)
                 self._last_nis = nis
             else:
-                nis = self._nis
+                nis, usable = self._nis, valid
             x, P, _ = self._advance(y, u, valid)
-        watch.accept(x, P, nis, valid, has_nis, self._x, self._P, self._diverged,
+        watch.accept(x, P, nis, usable, has_nis, self._x, self._P, self._diverged,
                      self._nis_run, self._nis, self._limits)
 
     def _restart_systems(self, mask: np.ndarray) -> None:

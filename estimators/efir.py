@@ -147,11 +147,10 @@ class ExtendedFIRFilter(WindowedEstimator):
         nom = self._nom if self._nom.ndim == 2 else self._nom[:, self._k_last % self.horizon]
         return nom[0].copy() if self._single else nom.copy()
 
-    def _innovation_terms(self, y: FloatArray, u: FloatArray | None,
-                          predict: np.ndarray) -> InnovationTerms:
+    def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
+                          x: FloatArray) -> InnovationTerms:
         """The model along the previous estimate: ``x⁻ = f(x̂, u)``, ``A = F(x̂, u)``,
         ``e = y − h(x⁻)``, ``H(x⁻)`` — the EKF's prediction from the EFIR's estimate."""
-        x = self._x
         n = x.shape[1]
         if self._k and predict.any():
             x_pred, A = self._linearize(x, u)

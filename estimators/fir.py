@@ -158,12 +158,12 @@ class FIRFilter(WindowedEstimator):
         """The gain of one window for this filter's target (``gain=`` path)."""
         return GAINS[self.gain](win, self._target, prior)
 
-    def _innovation_terms(self, y: FloatArray, u: FloatArray | None,
-                          predict: np.ndarray) -> InnovationTerms:
+    def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
+                          x: FloatArray) -> InnovationTerms:
         """The plant model's (``model``, not UFIR's ``Q = 0, R = I``) one-step prediction
         from the previous estimate: ``x⁻ = A x̂ + B u``, ``e = y − C x⁻`` (matrices of
         ``k − 1`` and ``k``)."""
-        k, x = self._k, self._x
+        k = self._k
         ti = self.time_invariant
         now = self.model.matrices(0 if ti else k)  # type: ignore[attr-defined]
         if not k:

@@ -44,8 +44,9 @@ APPLICABLE = {
     "fir_gym/PendulumSlider-v0": ["ekf", "ukf", "lkf", "efir"],
 }
 CONSISTENT = {"fir_gym/UncertainOscillator-v0": {"delta_schedule": ()}}
-WINDOWED = {"efir", "fir", "ufir", "rfir"}
-CASES = [(env_id, name) for env_id, names in APPLICABLE.items() for name in names]
+WINDOWED = {"efir", "fir", "ufir", "rfir", "fir-smoother"}
+CASES = [(env_id, name) for env_id, names in APPLICABLE.items() for name in names] + [
+    ("fir_gym/CarrierMotion-v0", "fir-smoother")]             # not an observation, but watched
 
 
 def vector_env(env_id: str, n: int) -> gym.vector.VectorEnv:

@@ -173,7 +173,8 @@ def makers():
             "ufir": lambda: UFIRFilter(model, horizon=6, nan_policy="skip"),
             "rfir": lambda: RecursiveFIRFilter(model, horizon=6),
             "efir": lambda: ExtendedFIRFilter(model, horizon=6, nan_policy="skip"),
-            "efir-reanchor": lambda: ExtendedFIRFilter(model, horizon=6, nominal="reanchor")}
+            "efir-reanchor": lambda: ExtendedFIRFilter(model, horizon=6, nominal="reanchor"),
+            "fir-smoother": lambda: FIRSmoother(model, horizon=6, nan_policy="skip")}
 
 
 @needs_twins
@@ -237,10 +238,37 @@ def test_the_growth_bound_flags_a_large_estimate(path: str) -> None:
         FIRFilter(model, horizon=6, max_estimate=0.0)
 
 
-def test_the_smoother_reports_no_nis() -> None:
-    f = FIRSmoother(carrier_model(), horizon=6)
-    f.step([0.1])
-    assert f.last_info["nis"] is None
+@pytest.mark.parametrize("path", PATHS)
+def test_the_smoothers_test_is_the_filters_over_the_same_window(path: str) -> None:
+    """The smoother's estimate lags; its innovation test is the FIR filter's over the same
+    window (oracle: FIRFilter itself), and the prior propagated open loop during start-up."""
+    model = carrier_model()
+    s, f = FIRSmoother(model, horizon=12), FIRFilter(model, horizon=12)
+    ys = linear_data(model, 200, 8)
+    nis_s, nis_f = [], []
+    for k, y in enumerate(ys):
+        u = None if k == 0 else np.array([0.2])
+        step_on(s, path == "twin", y, u)
+        step_on(f, path == "twin", y, u)
+        nis_s.append(s.last_info["nis"])
+        nis_f.append(f.last_info["nis"])
+    assert np.all(np.isfinite(nis_s)) and not s.diverged
+    np.testing.assert_allclose(nis_s[12:], nis_f[12:], rtol=1e-9)
+    first, _ = _smoother_on_a_jump(path)
+    assert first is not None and first < 20
+
+
+def _smoother_on_a_jump(path: str):
+    model = carrier_model()
+    s = FIRSmoother(model, horizon=12)
+    ys = linear_data(model, 80, 9)
+    ys[40:] += 30.0 * (-1.0) ** np.arange(40)[:, None]        # the data leave the model
+    first = None
+    for k, y in enumerate(ys):
+        step_on(s, path == "twin", y, None if k == 0 else np.zeros(1))
+        if s.diverged and first is None:
+            first = k - 40
+    return first, s
 
 
 # ---------------------------------------------------------------- one observability rule
