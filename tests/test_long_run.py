@@ -8,8 +8,8 @@ seeded random actions through :class:`~fir_gym.wrappers.VectorEstimatorObservati
 batched estimator, restarted per sub-env at every autoreset — for ``STEPS`` steps, and
 checks after every step that no estimate is NaN or infinite and that every covariance is
 symmetric (to 1e-12 of its size) positive semidefinite (eigenvalues above ``−16 n ε
-‖P‖``). The plants run on their own model (UncertainOscillator without the paper's δ burst, which the δ = 0 model
-does not describe), so every raised ``estimator_diverged`` flag is a false alarm; the
+‖P‖``). The plants run on their own model (UncertainOscillator without the paper's δ
+burst, which the δ = 0 model does not describe), so every raised ``estimator_diverged`` flag is a false alarm; the
 rate is reported per system-step and per episode, and for the windowed filters (whose
 test issue 18 added) it must stay below ``1e-5`` per system-step. ``FIR_GYM_LONG_RUN``
 scales the run (``FIR_GYM_LONG_RUN=0.01`` for a quick look).
