@@ -1,15 +1,16 @@
 """Issue 18's long run: 1e6 system-steps of every filter on every plant it applies to.
 
-Marked ``slow`` and so not in the default run (``pyproject.toml``: ``-m "not slow"``); run
-it with ``pytest -m slow tests/test_long_run.py -s`` (``-s`` prints one line per case:
-the steps, episodes, flags and the false-alarm rates). Each case drives ``SYSTEMS``
-sub-envs of the plant (its native vector env; PendulumSlider: a sync vector env) with
-seeded random actions through :class:`~fir_gym.wrappers.VectorEstimatorObservation` — one
-batched estimator, restarted per sub-env at every autoreset — for ``STEPS`` steps, and
-checks after every step that no estimate is NaN or infinite and that every covariance is
-symmetric (to 1e-12 of its size) positive semidefinite (eigenvalues above ``−16 n ε
-‖P‖``). The plants run on their own model (UncertainOscillator without the paper's δ
-burst, which the δ = 0 model does not describe), so every raised ``estimator_diverged`` flag is a false alarm; the
+Marked ``slow`` and so not in the default run (``pyproject.toml``: ``-m "not slow"``);
+run it with ``pytest -m slow tests/test_long_run.py -s`` (``-s`` prints one line per
+case: the steps, episodes, flags and the false-alarm rates). Each case drives
+``SYSTEMS`` sub-envs of the plant (its native vector env; PendulumSlider: a sync vector
+env) with seeded random actions through
+:class:`~fir_gym.wrappers.VectorEstimatorObservation` — one batched estimator, restarted
+per sub-env at every autoreset — for ``STEPS`` steps, and checks after every step that
+no estimate is NaN or infinite and that every covariance is symmetric (to 1e-12 of its
+size) and positive semidefinite (eigenvalues above ``−16 n ε ‖P‖``). The plants run on
+their own model (UncertainOscillator without the paper's δ burst, which the δ = 0 model
+does not describe), so every raised ``estimator_diverged`` flag is a false alarm; the
 rate is reported per system-step and per episode, and for the windowed filters (whose
 test issue 18 added) it must stay below ``1e-5`` per system-step. ``FIR_GYM_LONG_RUN``
 scales the run (``FIR_GYM_LONG_RUN=0.01`` for a quick look).
