@@ -24,6 +24,7 @@ import time
 import gymnasium as gym
 import numpy as np
 import pytest
+from applicable import APPLICABLE
 
 import fir_gym  # noqa: F401
 from fir_gym.wrappers import VectorEstimatorObservation
@@ -35,15 +36,6 @@ SYSTEMS = 1000
 STEPS = max(10, int(1000 * SCALE))                 # SYSTEMS x STEPS = 1e6 system-steps
 EPS = np.finfo(float).eps
 
-#: the filters that apply to each plant (as tests/wrappers/test_filters_in_the_loop.py)
-APPLICABLE = {
-    "fir_gym/Orbit-v0": ["ekf", "ukf", "lkf", "efir"],
-    "fir_gym/UncertainOscillator-v0": ["ekf", "ukf", "lkf", "efir"],
-    "fir_gym/CarrierMotion-v0": ["kf", "ekf", "ukf", "lkf", "efir", "fir", "ufir", "rfir",
-                                 "cd-ekf", "bpf-kf"],
-    "fir_gym/VanDerPol-v0": ["ekf", "ukf", "lkf", "efir", "cd-ekf", "bpf-kf"],
-    "fir_gym/PendulumSlider-v0": ["ekf", "ukf", "lkf", "efir"],
-}
 CONSISTENT = {"fir_gym/UncertainOscillator-v0": {"delta_schedule": ()}}
 WINDOWED = {"efir", "fir", "ufir", "rfir", "fir-smoother"}
 CASES = [(env_id, name) for env_id, names in APPLICABLE.items() for name in names] + [

@@ -73,6 +73,25 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
 
 
 @jit
+def sandwich(M: np.ndarray, P: np.ndarray, Q: np.ndarray, MP: np.ndarray, out: np.ndarray
+             ) -> None:
+    """``out = (M P) Mᵀ + Q`` for one system (``MP`` is scratch)."""
+    r, n = M.shape
+    for i in range(r):
+        for j in range(n):
+            c = 0.0
+            for k in range(n):
+                c += M[i, k] * P[k, j]
+            MP[i, j] = c
+    for i in range(r):
+        for j in range(r):
+            c = 0.0
+            for k in range(n):
+                c += MP[i, k] * M[j, k]
+            out[i, j] = c + Q[i, j]
+
+
+@jit
 def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
                    R: np.ndarray, e: np.ndarray, predict: np.ndarray, valid: np.ndarray,
                    out: np.ndarray) -> None:
@@ -93,34 +112,12 @@ def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
         Hb = H[b if H.shape[0] > 1 else 0]
         Pb = P[b]
         if predict[b]:                                  # P⁻ = (A P) Aᵀ + Qx
-            for i in range(n):
-                for j in range(n):
-                    c = 0.0
-                    for k in range(n):
-                        c += Ab[i, k] * Pb[k, j]
-                    AP[i, j] = c
-            for i in range(n):
-                for j in range(n):
-                    c = 0.0
-                    for k in range(n):
-                        c += AP[i, k] * Ab[j, k]
-                    Pm[i, j] = c + Qb[i, j]
+            sandwich(Ab, Pb, Qb, AP, Pm)
         else:
             for i in range(n):
                 for j in range(n):
                     Pm[i, j] = Pb[i, j]
-        for i in range(p):                              # S = (H P⁻) Hᵀ + R, symmetrised
-            for j in range(n):
-                c = 0.0
-                for k in range(n):
-                    c += Hb[i, k] * Pm[k, j]
-                HP[i, j] = c
-        for i in range(p):
-            for j in range(p):
-                c = 0.0
-                for k in range(n):
-                    c += HP[i, k] * Hb[j, k]
-                S[i, j] = c + R[i, j]
+        sandwich(Hb, Pm, R, HP, S)                      # S = (H P⁻) Hᵀ + R, symmetrised
         for i in range(p):
             for j in range(i):
                 v = 0.5 * (S[i, j] + S[j, i])
