@@ -136,29 +136,32 @@ def psd_factor(P: np.ndarray, L: np.ndarray, nb: int) -> None:
     the Cholesky pass): the semidefinite Cholesky factor (a pivot at or below ``4 n ε P_jj``
     is zero, with its column) where ``P`` is PSD up to round-off, ``V Λ₊^½`` of the nearest
     PSD matrix where a pivot is below ``−4 n ε P_jj`` — the twin of
-    :func:`~fir_gym.estimators._kalman_linalg.psd_factor`."""
+    :func:`~fir_gym.estimators._kalman_linalg.psd_factor`. The systems run innermost, as in
+    :func:`cholesky`."""
     n = P.shape[0]
+    indefinite = np.zeros(nb, dtype=np.bool_)
+    keep = np.empty(nb, dtype=np.bool_)
     for i in range(n):
         for j in range(n):
             for t in range(nb):
                 L[i, j, t] = 0.0
-    for t in range(nb):
-        indefinite = False
-        for j in range(n):
+    for j in range(n):
+        for t in range(nb):
             d = P[j, j, t]
             for k in range(j):
                 d -= L[j, k, t] * L[j, k, t]
             tol = (PIVOT_EPS * n) * abs(P[j, j, t])
-            keep = d > tol
-            indefinite = indefinite or not d >= -tol
-            ljj = np.sqrt(d) if keep else 1.0
-            L[j, j, t] = ljj if keep else 0.0
-            for i in range(j + 1, n):
+            keep[t] = d > tol
+            indefinite[t] = indefinite[t] or not d >= -tol
+            L[j, j, t] = np.sqrt(d) if keep[t] else 0.0
+        for i in range(j + 1, n):
+            for t in range(nb):
                 c = P[i, j, t]
                 for k in range(j):
                     c -= L[i, k, t] * L[j, k, t]
-                L[i, j, t] = c / ljj if keep else 0.0
-        if indefinite:                               # the nearest PSD matrix's factor
+                L[i, j, t] = c / L[j, j, t] if keep[t] else 0.0
+    for t in range(nb):
+        if indefinite[t]:                            # the nearest PSD matrix's factor
             M = np.empty((n, n))
             finite = True
             for i in range(n):
