@@ -132,9 +132,8 @@ class WindowedEstimator(Estimator):
             if has_nis:
                 P_prev, A, Qx, H, R, e, predict, usable = self._nis_inputs(y, u, valid)
                 nis = np.empty(y.shape[0])
-                watch.innovation_nis(np.ascontiguousarray(P_prev), _batch(A), _batch(Qx),
-                                     _batch(H), np.ascontiguousarray(R),
-                                     np.ascontiguousarray(e), predict, usable, nis)
+                watch.innovation_nis(_batch(P_prev), _batch(A), _batch(Qx), _batch(H),
+                                     _batch(R), _batch(e), predict, usable, nis)
                 self._last_nis = nis
             else:
                 nis, usable = self._nis, valid
@@ -155,5 +154,9 @@ class WindowedEstimator(Estimator):
 
 
 def _batch(M: FloatArray) -> FloatArray:
-    """``M`` as a C-contiguous ``(B|1, r, c)`` float64 array (a 2-D ``M`` is shared)."""
-    return np.ascontiguousarray(M[None] if M.ndim == 2 else M, dtype=np.float64)
+    """``M`` as a C-contiguous float64 array (the compiled kernel's layout); ``M`` itself when
+    it is one already. Matrices come as ``(B|1, r, c)``, a 2-D matrix as ``(1, r, c)`` —
+    except ``R`` and ``e``, which the kernel takes 2-D (callers pass them as they are)."""
+    if type(M) is np.ndarray and M.dtype == np.float64 and M.flags.c_contiguous:
+        return M
+    return np.ascontiguousarray(M, dtype=np.float64)

@@ -158,7 +158,7 @@ class ExtendedFIRFilter(WindowedEstimator):
                 x_pred = np.where(predict[:, None], x_pred, x)
         else:
             x_pred, A = x, np.eye(n)[None]
-        Qx = np.zeros((1, n, n)) if self._Qx is None else self._Qx
+        Qx = np.zeros((1, n, n)) if self._Qx is None else self._Qx[None]
         return y - self._h(x_pred), A, Qx, self._H(x_pred), self._R
 
     def _reset_state(self) -> None:

@@ -162,20 +162,31 @@ class FIRFilter(WindowedEstimator):
                           x: FloatArray) -> InnovationTerms:
         """The plant model's (``model``, not UFIR's ``Q = 0, R = I``) one-step prediction
         from the previous estimate: ``x⁻ = A x̂ + B u``, ``e = y − C x⁻`` (matrices of
-        ``k − 1`` and ``k``)."""
+        ``k − 1`` and ``k``; a time-invariant model's are prepared once)."""
         k = self._k
-        ti = self.time_invariant
-        now = self.model.matrices(0 if ti else k)  # type: ignore[attr-defined]
+        if self.time_invariant:
+            terms = getattr(self, "_test_matrices", None)
+            if terms is None:
+                m = self.model.matrices(0)  # type: ignore[attr-defined]
+                terms = self._test_matrices = (
+                    np.ascontiguousarray(m.A.T), np.ascontiguousarray(m.B.T),
+                    np.ascontiguousarray(m.C.T), np.ascontiguousarray(m.A[None]),
+                    np.ascontiguousarray((m.G @ m.Q @ m.G.T)[None]),
+                    np.ascontiguousarray(m.C[None]), np.ascontiguousarray(m.R))
+            At, Bt, Ct, A, Qx, C, R = terms
+        else:
+            now = self.model.matrices(k)  # type: ignore[attr-defined]
+            prev = self.model.matrices(max(k - 1, 0))  # type: ignore[attr-defined]
+            At, Bt, Ct, A, Qx, C, R = (prev.A.T, prev.B.T, now.C.T, prev.A[None],
+                                       (prev.G @ prev.Q @ prev.G.T)[None], now.C[None], now.R)
         if not k:
-            return y - x @ now.C.T, np.eye(self._n)[None], np.zeros((1, self._n, self._n)), \
-                now.C, now.R
-        prev = now if ti else self.model.matrices(k - 1)  # type: ignore[attr-defined]
-        x_pred = x @ prev.A.T
+            return y - x @ Ct, A, Qx, C, R                 # the prior (predict is False)
+        x_pred = x @ At
         if u is not None and self._nu:
-            x_pred += u @ prev.B.T
+            x_pred += u @ Bt
         if not predict.all():
             x_pred = np.where(predict[:, None], x_pred, x)
-        return y - x_pred @ now.C.T, prev.A, prev.G @ prev.Q @ prev.G.T, now.C, now.R
+        return y - x_pred @ Ct, A, Qx, C, R
 
     def _reset_state(self) -> None:
         self._hist: deque[Any] = deque(maxlen=self._slots)
