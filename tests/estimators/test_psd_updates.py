@@ -187,3 +187,16 @@ def test_the_compiled_factor_equals_the_numpy_one(n: int, seed: int, p_exp: floa
     compiled_linalg.psd_rebuild(block, np.empty_like(block), 1)
     assert_psd(block[:, :, 0], "compiled rebuild")
     np.testing.assert_allclose(block[:, :, 0], ref, rtol=0, atol=1e-12 * np.abs(P).max())
+
+
+def test_cd_ekf_prediction_alone_is_psd() -> None:
+    """A skipped measurement returns the propagated prior: RK4 of the covariance flow from
+    P0 = 1e12 I left an eigenvalue of -1.4 there before the flow's end was rebuilt."""
+    env = gym.make("fir_gym/CarrierMotion-v0")
+    f = make_estimator("cd-ekf", env.unwrapped.continuous_model,     # type: ignore[attr-defined]
+                       P0=1e12 * np.eye(2), nan_policy="skip")
+    y, _ = env.reset(seed=0)
+    f.step(y)
+    for _ in range(3):
+        f.step([np.nan], np.zeros(1))
+        assert_psd(f.P, "cd-ekf prediction")
