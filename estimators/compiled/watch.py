@@ -73,32 +73,15 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
 
 
 @jit
-def sandwich(M: np.ndarray, P: np.ndarray, Q: np.ndarray, MP: np.ndarray, out: np.ndarray
-             ) -> None:
-    """``out = (M P) Mᵀ + Q`` for one system (``MP`` is scratch)."""
-    r, n = M.shape
-    for i in range(r):
-        for j in range(n):
-            c = 0.0
-            for k in range(n):
-                c += M[i, k] * P[k, j]
-            MP[i, j] = c
-    for i in range(r):
-        for j in range(r):
-            c = 0.0
-            for k in range(n):
-                c += MP[i, k] * M[j, k]
-            out[i, j] = c + Q[i, j]
-
-
-@jit
 def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
                    R: np.ndarray, e: np.ndarray, predict: np.ndarray, valid: np.ndarray,
                    out: np.ndarray) -> None:
     """``out[b] = eᵀ S⁻¹ e``, ``S = H P⁻ Hᵀ + R``, ``P⁻ = A P Aᵀ + Qx`` (``P`` where ``predict``
     is False) for every system; NaN where ``valid`` is False or ``S`` is not positive
-    definite. Shapes as the reference's; a leading axis of length 1 is shared. ``S⁻¹``
-    as there: closed form for ``p <= 2`` (PD test ``s11 > 0, det > 0``), else Cholesky."""
+    definite. Shapes as the reference's (``R`` 2-D); a leading axis of length 1 is shared.
+    ``S⁻¹`` as there: closed form for ``p <= 2`` (PD test ``s11 > 0, det > 0``), else
+    Cholesky. The two products are written out with plain indices: per-system views or a
+    helper call cost several times the 2 x 2 algebra (700 ns against 110 ns a system)."""
     n_b, n = P.shape[0], P.shape[1]
     p = H.shape[1]
     AP, Pm, HP = np.empty((n, n)), np.empty((n, n)), np.empty((p, n))
@@ -107,32 +90,52 @@ def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
         if not valid[b]:
             out[b] = np.nan
             continue
-        Ab = A[b if A.shape[0] > 1 else 0]
-        Qb = Qx[b if Qx.shape[0] > 1 else 0]
-        Hb = H[b if H.shape[0] > 1 else 0]
-        Pb = P[b]
+        ab = b if A.shape[0] > 1 else 0
+        qb = b if Qx.shape[0] > 1 else 0
+        hb = b if H.shape[0] > 1 else 0
         if predict[b]:                                  # P⁻ = (A P) Aᵀ + Qx
-            sandwich(Ab, Pb, Qb, AP, Pm)
+            for i in range(n):
+                for j in range(n):
+                    c = 0.0
+                    for k in range(n):
+                        c += A[ab, i, k] * P[b, k, j]
+                    AP[i, j] = c
+            for i in range(n):
+                for j in range(n):
+                    c = 0.0
+                    for k in range(n):
+                        c += AP[i, k] * A[ab, j, k]
+                    Pm[i, j] = c + Qx[qb, i, j]
         else:
             for i in range(n):
                 for j in range(n):
-                    Pm[i, j] = Pb[i, j]
-        sandwich(Hb, Pm, R, HP, S)                      # S = (H P⁻) Hᵀ + R, symmetrised
+                    Pm[i, j] = P[b, i, j]
+        for i in range(p):                              # S = (H P⁻) Hᵀ + R
+            for j in range(n):
+                c = 0.0
+                for k in range(n):
+                    c += H[hb, i, k] * Pm[k, j]
+                HP[i, j] = c
         for i in range(p):
+            for j in range(p):
+                c = 0.0
+                for k in range(n):
+                    c += HP[i, k] * H[hb, j, k]
+                S[i, j] = c + R[i, j]
+        for i in range(p):                              # symmetrised
             for j in range(i):
                 v = 0.5 * (S[i, j] + S[j, i])
                 S[i, j] = v
                 S[j, i] = v
-        eb = e[b]
         if p == 1:
-            out[b] = eb[0] * (1.0 / S[0, 0]) * eb[0] if S[0, 0] > 0.0 else np.nan
+            out[b] = e[b, 0] * (1.0 / S[0, 0]) * e[b, 0] if S[0, 0] > 0.0 else np.nan
         elif p == 2:
             a, c, d = S[0, 0], S[0, 1], S[1, 1]
             det = a * d - c * c
             if a > 0.0 and det > 0.0:
                 w00, w11, w01 = d / det, a / det, -c / det
-                out[b] = (eb[0] * (w00 * eb[0] + w01 * eb[1])
-                          + eb[1] * (w01 * eb[0] + w11 * eb[1]))
+                e0, e1 = e[b, 0], e[b, 1]
+                out[b] = e0 * (w00 * e0 + w01 * e1) + e1 * (w01 * e0 + w11 * e1)
             else:
                 out[b] = np.nan
         else:                                           # Cholesky: NIS = |L⁻¹ e|²
@@ -150,7 +153,7 @@ def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
                     L[i, j] = c / L[j, j]
             q = 0.0
             for i in range(p):
-                c = eb[i]
+                c = e[b, i]
                 for k in range(i):
                     c -= L[i, k] * z[k]
                 z[i] = c / L[i, i]
