@@ -144,3 +144,81 @@ def logdet_of_inverse(W: FloatArray, n_b: int) -> FloatArray:
         sign, logdet = np.linalg.slogdet(W)
     out = np.where(sign > 0, -logdet, np.nan)
     return np.array(np.broadcast_to(out, (n_b,)))
+
+
+#: the pivot tolerance of :func:`psd_factor`, in units of machine epsilon times ``n``
+_PIVOT_EPS = 4.0 * float(np.finfo(np.float64).eps)
+
+
+def psd_factor(P: FloatArray) -> FloatArray:
+    """A factor ``L`` with ``L Lᵀ = P`` of a batch of symmetric ``P`` (B, n, n) that is PSD up
+    to round-off — or, where it is not, of its nearest PSD matrix.
+
+    The semidefinite Cholesky factor (Higham, *Accuracy and Stability of Numerical
+    Algorithms*, 2002, §10.3): a pivot at or below ``4 n ε P_jj`` is taken as zero, with its
+    column — a change of ``P`` no larger than its round-off. A pivot below ``−4 n ε P_jj``
+    means ``P`` is indefinite beyond round-off; that system's factor is then ``V Λ₊^½`` from
+    its eigen-decomposition ``P = V Λ Vᵀ`` with the negative eigenvalues set to zero, the
+    nearest PSD matrix in the Frobenius norm (Higham 1988). Only the lower triangle of ``P``
+    is read by the Cholesky pass."""
+    n = P.shape[-1]
+    L = np.zeros_like(P)
+    tol = (_PIVOT_EPS * n) * np.abs(np.diagonal(P, axis1=-2, axis2=-1))
+    indefinite = np.zeros(P.shape[0], bool)
+    for j in range(n):
+        Lj = L[:, j, :j]
+        d = P[:, j, j] - np.einsum("bk,bk->b", Lj, Lj) if j else P[:, j, j]
+        keep = d > tol[:, j]
+        indefinite |= ~(d >= -tol[:, j])                   # NaN counts as indefinite
+        ljj = np.sqrt(np.where(keep, d, 1.0))
+        L[:, j, j] = np.where(keep, ljj, 0.0)
+        if j + 1 < n:
+            col = P[:, j + 1:, j] - (L[:, j + 1:, :j] @ Lj[:, :, None])[:, :, 0] if j else \
+                P[:, j + 1:, j]
+            L[:, j + 1:, j] = np.where(keep[:, None], col / ljj[:, None], 0.0)
+    if indefinite.any():
+        Pi = P[indefinite]
+        Pi = 0.5 * (Pi + Pi.swapaxes(-1, -2))
+        finite = np.isfinite(Pi).all(axis=(-2, -1))
+        lam, V = np.linalg.eigh(np.where(finite[:, None, None], Pi, 0.0))
+        Li = V * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
+        L[indefinite] = np.where(finite[:, None, None], Li, np.nan)
+    return L
+
+
+def gram(*factors: FloatArray) -> FloatArray:
+    """``Σ M Mᵀ`` over the batched factors ``M`` (B, n, ·): symmetric positive semidefinite
+    by construction (a sum of Gram matrices; the upper triangle is the lower one's mirror,
+    so it is exactly symmetric, and rounding leaves its eigenvalues above ``−γ ‖M‖²``)."""
+    P = sum(mul_t(M, M) for M in factors)
+    assert isinstance(P, np.ndarray)
+    lower = np.tril(P)
+    return lower + np.tril(P, -1).swapaxes(-1, -2)
+
+
+def factored_joseph(P: FloatArray, H: FloatArray, R: FloatArray, K: FloatArray) -> FloatArray:
+    """The Joseph-form update ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` computed from factors,
+    ``P⁺ = M Mᵀ + N Nᵀ`` with ``M = (I − K H) L``, ``N = K L_R``, ``L Lᵀ = P``, ``L_R L_Rᵀ = R``
+    (:func:`psd_factor`, :func:`gram`): positive semidefinite and exactly symmetric by
+    construction for any gain ``K`` and any ``P`` (a ``P`` that round-off left indefinite
+    is replaced by its nearest PSD matrix, :func:`psd_factor`). The plain Joseph product
+    subtracts terms of the size of ``‖P‖`` to leave ``P⁺``: with ``P0 = 1e12 I`` and
+    ``R = 1e-12`` its round-off (``ε ‖P‖ ≈ 1e-4``) exceeds the exact ``P⁺ ≈ R`` and leaves
+    the PSD cone; the factor ``M`` is formed with the same round-off relative to ``‖L‖ =
+    ‖P‖^½`` only, and ``M Mᵀ`` is a Gram matrix (docs/architecture.md#covariance-updates).
+    ``H, R`` 2-D (shared) or batched; ``P`` may be a batch of one shared by many systems
+    (then so is ``K``)."""
+    n = P.shape[-1]
+    L = psd_factor(P)
+    IKH = eye(n) - (rmul(K, H) if H.ndim == 2 else K @ H)
+    LR = psd_factor(np.broadcast_to(R, (1,) + R.shape) if R.ndim == 2 else R)
+    N = rmul(K, LR[0]) if R.ndim == 2 else K @ LR
+    return gram(IKH @ L, N)
+
+
+def psd_rebuild(P: FloatArray) -> FloatArray:
+    """``L Lᵀ`` of the factor of ``P`` (:func:`psd_factor`): ``P`` itself (to round-off) when
+    it is positive semidefinite, else its nearest PSD matrix — symmetric PSD by
+    construction. The repair of an update that cannot be written as a Gram matrix (the
+    UKF's ``P⁻ − K S Kᵀ``, the Riccati flows of paper 002)."""
+    return gram(psd_factor(P))

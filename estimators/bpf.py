@@ -63,6 +63,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._kalman_linalg import psd_rebuild
 from ._validation import FloatArray, one_of, positive
 from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
@@ -335,7 +336,9 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
         S = Hm @ P @ np.swapaxes(Hm, 1, 2) + cm.R / h
         nis = np.einsum("bi,bi->b", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
         x_next = bpf_state_step(x, A - K @ Hm, b + (K @ (y - d)[:, :, None])[:, :, 0], h)
-        return x_next, step.P_next, np.where(valid, nis, np.nan)
+        # P = V U⁻¹ is no Gram matrix: rebuilt from its semidefinite factor, it is symmetric
+        # PSD by construction (docs/architecture.md#covariance-updates)
+        return x_next, psd_rebuild(step.P_next), np.where(valid, nis, np.nan)
 
     def _global(self, restarted: RiccatiStep, M: FloatArray, h: float) -> RiccatiStep:
         """The global recursion where it is still well conditioned; the restart elsewhere."""

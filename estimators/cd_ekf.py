@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._kalman_linalg import psd_rebuild
 from ._validation import FloatArray, one_of, positive
 from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
@@ -120,7 +121,11 @@ def cd_ekf_propagate(
         k4 = rates(z + tau * k3[0], S + tau * k3[1])
         z = z + tau / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         S = S + tau / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-    S = 0.5 * (S + np.swapaxes(S, 1, 2))
+    # RK4 of the covariance flow is not PSD-preserving: from P0 = 1e12 I on CarrierMotion one
+    # interval left an eigenvalue of -1.4 (whose exact Joseph update is indefinite too). The
+    # flow's end is rebuilt from its PSD factor (its nearest PSD matrix where it is not PSD;
+    # docs/architecture.md#covariance-updates)
+    S = psd_rebuild(S)
     return (z[0], S[0]) if single else (z, S)
 
 

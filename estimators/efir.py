@@ -47,8 +47,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._fir_bank import WindowBank
+from ._observability import index_along, require_window
 from ._validation import FloatArray, as_covariance, one_of, positive
-from ._windowed import WindowedEstimator
+from ._windowed import InnovationTerms, WindowedEstimator
 from .extended import model_callables, model_linearizer
 from .fir_gains import WINDOW_FORMS
 from .model import StateSpaceModel
@@ -116,6 +117,27 @@ class ExtendedFIRFilter(WindowedEstimator):
         super().__init__(model, x0=x0, P0=P0, **options)
         self._f, self._F, self._h, self._H = model_callables(model)
         self._linearize = model_linearizer(model)
+        self._require_observable_nominal()
+
+    def _require_observable_nominal(self) -> None:
+        """The one observability rule (:mod:`._observability`) along the nominal: ``F, H`` on
+        the open-loop trajectory from ``x0`` (every system's, for a batched prior) with zero
+        input, over ``max(4 n, horizon)`` measurements."""
+        n = self.model.n_x
+        steps = max(4 * n, self.horizon)
+        X = X0 = np.array(self._x0, dtype=float).reshape(-1, n)
+        U = np.zeros((X.shape[0], self.model.n_u))
+        pairs = []
+        with np.errstate(all="ignore"):
+            for _ in range(steps):
+                C = self._H(X)
+                X, A = self._linearize(X, U)
+                pairs.append((A, C))
+            index = index_along(pairs, self._R)
+        start = np.array2string(X0[0] if len(X0) == 1 else X0, precision=4, separator=", ")
+        where = f"its nominal from x0={start}" + ("" if self.nominal == "open-loop" else
+                                         " (the first windows' anchor)")
+        require_window(self.horizon, index, where, steps)
 
     @property
     def x_nominal(self) -> FloatArray | None:
@@ -124,6 +146,20 @@ class ExtendedFIRFilter(WindowedEstimator):
             return None
         nom = self._nom if self._nom.ndim == 2 else self._nom[:, self._k_last % self.horizon]
         return nom[0].copy() if self._single else nom.copy()
+
+    def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
+                          x: FloatArray) -> InnovationTerms:
+        """The model along the previous estimate: ``x⁻ = f(x̂, u)``, ``A = F(x̂, u)``,
+        ``e = y − h(x⁻)``, ``H(x⁻)`` — the EKF's prediction from the EFIR's estimate."""
+        n = x.shape[1]
+        if self._k and predict.any():
+            x_pred, A = self._linearize(x, u)
+            if not predict.all():
+                x_pred = np.where(predict[:, None], x_pred, x)
+        else:
+            x_pred, A = x, np.eye(n)[None]
+        Qx = np.zeros((1, n, n)) if self._Qx is None else self._Qx[None]
+        return y - self._h(x_pred), A, Qx, self._H(x_pred), self._R
 
     def _reset_state(self) -> None:
         self._nom: FloatArray | None = None

@@ -18,9 +18,10 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._fir_bank import WindowBank, information_is_regular
+from ._fir_bank import WindowBank
+from ._observability import index_along, observability_index, require_window
 from ._validation import FloatArray, as_covariance, one_of, positive
-from ._windowed import WindowedEstimator
+from ._windowed import InnovationTerms, WindowedEstimator
 from .errors import needs_linear
 from .fir_gains import (
     WINDOW_FORMS,
@@ -38,23 +39,6 @@ from .model import StateSpaceModel
 from .registry import register_estimator
 
 GAINS = {"two-stage": two_stage_gain, "batch": batch_gain, "riccati": riccati_gain}
-
-
-def observability_index(A: ArrayLike, C: ArrayLike, R: ArrayLike | None = None) -> int | None:
-    """Smallest number ``ν`` of measurements that determines the state of ``(A, C)``.
-
-    Uses the :data:`RANK_RTOL` test on ``Σ_{j<m} (C A^j)ᵀ R⁻¹ (C A^j)``; returns
-    ``None`` when ``(A, C)`` is unobservable (no ``m ≤ n`` qualifies).
-    """
-    A_, C_ = np.asarray(A, float), np.atleast_2d(np.asarray(C, float))
-    R_ = np.eye(C_.shape[0]) if R is None else np.atleast_2d(np.asarray(R, float))
-    F, Ck = np.zeros((A_.shape[0],) * 2), C_.copy()
-    for m in range(1, A_.shape[0] + 1):
-        F = F + Ck.T @ np.linalg.solve(R_, Ck)
-        if information_is_regular(F):
-            return m
-        Ck = Ck @ A_
-    return None
 
 
 class FIRFilter(WindowedEstimator):
@@ -131,6 +115,11 @@ class FIRFilter(WindowedEstimator):
         self._prior = self._prior_covariance(prior)
         if self.time_invariant:
             self._fixed_gain()
+        elif self._prior is None:                     # the one rule, along k = 0, 1, ...
+            steps = max(self._n, self.horizon)
+            mats = [self._model.matrices(k) for k in range(steps)]  # type: ignore[attr-defined]
+            require_window(self.horizon, index_along(((m.A, m.C) for m in mats), mats[0].R),
+                           "(A_k, C_k) from k = 0", steps)
         super().__init__(model, x0=x0, P0=P0, **options)
 
     @staticmethod
@@ -155,15 +144,9 @@ class FIRFilter(WindowedEstimator):
     def _fixed_gain(self) -> None:
         L, mats = self.horizon, self._model.matrices(0)  # type: ignore[attr-defined]
         self._win = make_window(mats.A, mats.C, mats.G @ mats.Q @ mats.G.T, mats.R, L, mats.B)
-        if self._prior is None:
-            nu = observability_index(mats.A, mats.C, mats.R)
-            if nu is None:
-                raise ValueError("(A, C) is not observable: no horizon gives an unbiased "
-                                 "FIR filter")
-            if L < nu:
-                raise ValueError(f"horizon={L} is shorter than the observability index of "
-                                 f"(A, C): the window cannot determine the state; use "
-                                 f"horizon >= {nu}")
+        if self._prior is None:                       # the one rule (_observability)
+            require_window(L, observability_index(mats.A, mats.C, mats.R), "(A, C)",
+                           self._n)
         try:
             res = self._compute_gain(self._win, self._prior)
         except ValueError as err:
@@ -175,6 +158,36 @@ class FIRFilter(WindowedEstimator):
     def _compute_gain(self, win: Window, prior: FloatArray | None = None) -> GainResult:
         """The gain of one window for this filter's target (``gain=`` path)."""
         return GAINS[self.gain](win, self._target, prior)
+
+    def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
+                          x: FloatArray) -> InnovationTerms:
+        """The plant model's (``model``, not UFIR's ``Q = 0, R = I``) one-step prediction
+        from the previous estimate: ``x⁻ = A x̂ + B u``, ``e = y − C x⁻`` (matrices of
+        ``k − 1`` and ``k``; a time-invariant model's are prepared once)."""
+        k = self._k
+        if self.time_invariant:
+            terms = getattr(self, "_test_matrices", None)
+            if terms is None:
+                m = self.model.matrices(0)  # type: ignore[attr-defined]
+                terms = self._test_matrices = (
+                    np.ascontiguousarray(m.A.T), np.ascontiguousarray(m.B.T),
+                    np.ascontiguousarray(m.C.T), np.ascontiguousarray(m.A[None]),
+                    np.ascontiguousarray((m.G @ m.Q @ m.G.T)[None]),
+                    np.ascontiguousarray(m.C[None]), np.ascontiguousarray(m.R))
+            At, Bt, Ct, A, Qx, C, R = terms
+        else:
+            now = self.model.matrices(k)  # type: ignore[attr-defined]
+            prev = self.model.matrices(max(k - 1, 0))  # type: ignore[attr-defined]
+            At, Bt, Ct, A, Qx, C, R = (prev.A.T, prev.B.T, now.C.T, prev.A[None],
+                                       (prev.G @ prev.Q @ prev.G.T)[None], now.C[None], now.R)
+        if not k:
+            return y - x @ Ct, A, Qx, C, R                 # the prior (predict is False)
+        x_pred = x @ At
+        if u is not None and self._nu:
+            x_pred += u @ Bt
+        if not predict.all():
+            x_pred = np.where(predict[:, None], x_pred, x)
+        return y - x_pred @ Ct, A, Qx, C, R
 
     def _reset_state(self) -> None:
         self._hist: deque[Any] = deque(maxlen=self._slots)

@@ -26,7 +26,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray
-from .fir import FIRFilter
+from .fir import FIRFilter, _combined_gain
+from .fir_gains import input_gain
 from .model import StateSpaceModel
 from .registry import register_estimator
 
@@ -48,6 +49,13 @@ class FIRSmoother(FIRFilter):
     far once they determine it (else ``x0``, ``P0``). After start-up a
     rank-deficient window (``last_info["rank_deficient"]``) returns the previous
     smoothed estimate predicted one step.
+
+    **Consistency** (docs/architecture.md#windowed-consistency). The smoothed estimate
+    lags the newest measurement, so the innovation test predicts ``y[k]`` from the FIR
+    *filter* estimate of ``x[k−1]`` over the same window — the same data, the filter's
+    gain and error covariance — and, during start-up, from the prior propagated open loop
+    (the filter's start-up fallback). The test does not count for a time-varying model,
+    a window with a missing measurement or a rank-deficient one (``nis`` is NaN there).
     """
 
     name: ClassVar[str] = "fir-smoother"
@@ -62,6 +70,47 @@ class FIRSmoother(FIRFilter):
                              "states; use gain='two-stage' or 'batch'")
         super().__init__(model, horizon=horizon, form="filter", gain=gain, prior=prior,
                          x0=x0, P0=P0, **options)
+
+    def _fixed_gain(self) -> None:
+        super()._fixed_gain()                          # the smoother's gain, self._G
+        self._target = "filter"                        # the filter's, for the test
+        try:
+            res = self._compute_gain(self._win, self._prior)
+        finally:
+            self._target = "smoother"
+        self._G_filter = _combined_gain(res.S, input_gain(self._win, res.S, "filter"),
+                                        "filter", self._p, self._nu)
+        self._P_filter = res.P
+
+    def _init_batch(self, n_batch: int) -> None:
+        super()._init_batch(n_batch)
+        self._x_test, self._P_test = self._x.copy(), self._P.copy()
+        self._test_ok = np.ones(n_batch, bool)
+
+    def _consistency_prior(self) -> tuple[FloatArray, FloatArray, np.ndarray | None]:
+        x, P, ok = self._x_test, self._P_test, self._test_ok
+        if self._restarting:                           # restarted systems: their prior
+            fresh = self._fresh
+            nb, n = x.shape
+            x = np.where(fresh[:, None], np.broadcast_to(self._x0, (nb, n)), x)
+            P = np.where(fresh[:, None, None], np.broadcast_to(self._P0, (nb, n, n)), P)
+            ok = ok | fresh
+        return x, P, ok
+
+    def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
+                 ) -> tuple[FloatArray, FloatArray, None]:
+        start = self._age < self._window_slots - 1     # before the pass counts this sample
+        x, P, _ = super()._advance(y, u, valid)
+        ok = (~np.atleast_1d(self._info["rank_deficient"]) | start) & self.time_invariant
+        x_f, P_f = self._x_open.copy(), self._P_open.copy()
+        full = ~start
+        if self.time_invariant and full.any():        # the filter over the same window
+            Z, V = self._window_data(self._G_filter.shape[1])
+            xw = Z.reshape(Z.shape[0], -1) @ self._G_filter.reshape(self._n, -1).T
+            x_f[full], P_f[full] = xw[full], self._P_filter
+            ok &= V[:, -self.horizon:].all(axis=1) | start
+        self._x_test, self._P_test, self._test_ok = x_f, P_f, ok
+        return x, P, None
 
     @property
     def lag(self) -> int:

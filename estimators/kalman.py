@@ -10,8 +10,10 @@ Estimation*, 2006, eqs 5.17–5.19), batched over a leading axis:
 
 ``S⁻¹`` is never formed by ``inv``: ``K`` and the normalised innovation squared
 ``NIS = eᵀ S⁻¹ e`` come from a Cholesky factorisation of ``S`` (closed form for
-``n_y <= 3``, vectorised over the batch). The Joseph form keeps ``P⁺``
-positive semi-definite for any gain; the result is symmetrised.
+``n_y <= 3``, vectorised over the batch). The Joseph form is evaluated from
+factors (:func:`~._kalman_linalg.factored_joseph`), which keeps ``P⁺`` symmetric
+positive semidefinite in floating point for any gain and any valid input
+(docs/architecture.md#covariance-updates).
 
 :class:`KalmanFilter` reads ``model.matrices(k)``; the pure functions also serve
 :class:`~.linearized.LinearizedKalmanFilter` and :class:`~.extended.ExtendedKalmanFilter`.
@@ -26,7 +28,7 @@ from numpy.typing import ArrayLike
 
 from ._kalman_linalg import (
     constant_or_batch,
-    eye,
+    factored_joseph,
     logdet_of_inverse,
     mul_t,
     rmul,
@@ -89,8 +91,9 @@ def gain_kernel(P: FloatArray, H: FloatArray, R: FloatArray
 
     Returns ``(K, W, P⁺)`` with ``W = S⁻¹`` (for the NIS). ``H`` and ``R`` are
     2-D (shared) or batched; ``P`` may be a batch of one shared by many systems.
+    ``P⁺`` is the Joseph form computed from factors (:func:`~._kalman_linalg.factored_joseph`):
+    symmetric positive semidefinite by construction.
     """
-    n = P.shape[1]
     if H.ndim == 2:
         PHt = rmul(P, H.T)                              # (B, n, m)
         S = rmul(PHt.mT, H.T) + R                       # H P Hᵀ + R (P symmetric)
@@ -99,9 +102,7 @@ def gain_kernel(P: FloatArray, H: FloatArray, R: FloatArray
         S = H @ PHt + R
     W = spd_inverse(S)
     K = PHt @ W
-    IKH = eye(n) - (rmul(K, H) if H.ndim == 2 else K @ H)
-    KR = rmul(K, R) if R.ndim == 2 else K @ R
-    return K, W, symmetrize(mul_t(IKH @ P, IKH) + mul_t(KR, K))
+    return K, W, factored_joseph(P, H, R, K)           # PSD by construction
 
 
 def correct(x: FloatArray, e: FloatArray, K: FloatArray, W: FloatArray

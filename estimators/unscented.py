@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike
 
 from ._batched_check import check_model_batched
 from ._hooked_moments import hooked_cross, hooked_moments
-from ._kalman_linalg import cholesky, logdet_of_inverse, rmul, spd_inverse, symmetrize
+from ._kalman_linalg import cholesky, logdet_of_inverse, psd_rebuild, rmul, spd_inverse, symmetrize
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
@@ -245,7 +245,12 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
 
     predict: ``χ = points(x, P)``, ``x⁻, P⁻ = UT(f(χ, u)) + G Q Gᵀ``;
     update: ``Z = h(χ⁻)``, ``ŷ, S = UT(Z) + R``, ``Pxz = Σ Wᶜ (χ⁻ − x⁻)(Z − ŷ)ᵀ``,
-    ``K = Pxz S⁻¹``, ``x⁺ = x⁻ + K (y − ŷ)``, ``P⁺ = P⁻ − K S Kᵀ`` (symmetrised).
+    ``K = Pxz S⁻¹``, ``x⁺ = x⁻ + K (y − ŷ)``, ``P⁺ = P⁻ − K S Kᵀ`` (symmetrised, then
+    rebuilt as ``L Lᵀ`` from its semidefinite factor,
+    :func:`~._kalman_linalg.psd_rebuild`: the difference has no Gram form — Merwe's
+    weight ``Wᶜ₀`` may be negative — and loses the PSD cone to round-off when ``P⁻`` is
+    huge against ``R``; the rebuild keeps ``P⁺`` symmetric PSD by construction,
+    docs/architecture.md#covariance-updates).
 
     Args:
         model: any :class:`StateSpaceModel`.
@@ -374,7 +379,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         K = Pxz @ W
         e = y - y_hat if res_y is None else res_y(y, y_hat)
         x_new = x + (K @ e[:, :, None])[:, :, 0]
-        P_new = symmetrize(P - K @ Pxz.mT)
+        P_new = psd_rebuild(symmetrize(P - K @ Pxz.mT))       # PSD by construction
         nis = ((W @ e[:, :, None])[:, :, 0] * e).sum(axis=1)
         if not valid.all():
             x_new = np.where(valid[:, None], x_new, x)

@@ -34,7 +34,15 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
-from .linalg import CHUNK, load, logdet_of_inverse, mul, spd_inverse, symmetrize_sum
+from .linalg import (
+    CHUNK,
+    factored_joseph,
+    load,
+    logdet_of_inverse,
+    mul,
+    spd_inverse,
+    symmetrize_sum,
+)
 from .watch import verdict
 
 EPS = float(np.finfo(np.float64).eps)
@@ -75,8 +83,8 @@ def gain_block(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, nb: int, PHt: np.
                S: np.ndarray, W: np.ndarray, L: np.ndarray, ok: np.ndarray, K: np.ndarray,
                IKH: np.ndarray, T: np.ndarray, U: np.ndarray, KR: np.ndarray) -> None:
     """The covariance half of the update on a block: ``W = S⁻¹`` (``ok`` where ``S`` is PD),
-    ``K = P⁻ Hᵀ S⁻¹`` and the Joseph-form ``U = P⁺``."""
-    n, m = Pm.shape[0], Hs.shape[0]
+    ``K = P⁻ Hᵀ S⁻¹`` and the Joseph-form ``U = P⁺``, from factors (PSD by construction)."""
+    m = Hs.shape[0]
     mul(Pm, Hs, PHt, nb, True)                       # P⁻ Hᵀ
     mul(Hs, PHt, S, nb, False)                       # H P⁻ Hᵀ
     for i in range(m):                               # S = H P⁻ Hᵀ + R
@@ -85,16 +93,7 @@ def gain_block(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, nb: int, PHt: np.
                 S[i, j, t] += Rs[i, j, t]
     spd_inverse(S, W, L, ok, nb)
     mul(PHt, W, K, nb, False)                        # K = P⁻ Hᵀ S⁻¹
-    mul(K, Hs, IKH, nb, False)                       # I − K H
-    for i in range(n):
-        for j in range(n):
-            for t in range(nb):
-                IKH[i, j, t] = (1.0 if i == j else 0.0) - IKH[i, j, t]
-    mul(Pm, IKH, T, nb, True)                        # P⁻ (I − K H)ᵀ
-    mul(IKH, T, U, nb, False)                        # (I − K H) P⁻ (I − K H)ᵀ
-    mul(K, Rs, KR, nb, False)
-    mul(KR, K, T, nb, True)                          # K R Kᵀ
-    symmetrize_sum(U, T, nb)                         # Joseph form, symmetrised
+    factored_joseph(Pm, Hs, Rs, K, nb, IKH, T, U, KR)  # Joseph form from factors: PSD
 
 
 @jit

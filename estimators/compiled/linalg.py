@@ -155,3 +155,116 @@ def logdet_of_inverse(W: np.ndarray, col: int) -> float:
                 c -= L[i, k] * L[j, k]
             L[i, j] = c / L[j, j]
     return -2.0 * total
+
+
+PIVOT_EPS = 4.0 * float(np.finfo(np.float64).eps)
+
+
+@jit
+def psd_factor(P: np.ndarray, L: np.ndarray, nb: int) -> None:
+    """The factor ``L`` (every entry written) of symmetric blocks ``P`` (lower triangle read by
+    the Cholesky pass): the semidefinite Cholesky factor (a pivot at or below ``4 n ε P_jj``
+    is zero, with its column) where ``P`` is PSD up to round-off, ``V Λ₊^½`` of the nearest
+    PSD matrix where a pivot is below ``−4 n ε P_jj`` — the twin of
+    :func:`~fir_gym.estimators._kalman_linalg.psd_factor`. The systems run innermost, as in
+    :func:`cholesky`."""
+    n = P.shape[0]
+    indefinite = np.zeros(nb, dtype=np.bool_)
+    keep = np.empty(nb, dtype=np.bool_)
+    for i in range(n):
+        for j in range(n):
+            for t in range(nb):
+                L[i, j, t] = 0.0
+    for j in range(n):
+        for t in range(nb):
+            d = P[j, j, t]
+            for k in range(j):
+                d -= L[j, k, t] * L[j, k, t]
+            tol = (PIVOT_EPS * n) * abs(P[j, j, t])
+            keep[t] = d > tol
+            indefinite[t] = indefinite[t] or not d >= -tol
+            L[j, j, t] = np.sqrt(d) if keep[t] else 0.0
+        for i in range(j + 1, n):
+            for t in range(nb):
+                c = P[i, j, t]
+                for k in range(j):
+                    c -= L[i, k, t] * L[j, k, t]
+                L[i, j, t] = c / L[j, j, t] if keep[t] else 0.0
+    for t in range(nb):
+        if indefinite[t]:                            # the nearest PSD matrix's factor
+            M = np.empty((n, n))
+            finite = True
+            for i in range(n):
+                for j in range(n):
+                    M[i, j] = 0.5 * (P[i, j, t] + P[j, i, t])
+                    finite = finite and np.isfinite(M[i, j])
+            if not finite:
+                for i in range(n):
+                    for j in range(n):
+                        L[i, j, t] = np.nan
+                continue
+            lam, V = np.linalg.eigh(M)
+            for i in range(n):
+                for j in range(n):
+                    L[i, j, t] = V[i, j] * np.sqrt(max(lam[j], 0.0))
+
+
+@jit
+def gram_lower(M: np.ndarray, N: np.ndarray, out: np.ndarray, nb: int) -> None:
+    """``out = M Mᵀ + N Nᵀ`` on blocks, lower triangle computed and mirrored: exactly
+    symmetric, positive semidefinite by construction (the twin of
+    :func:`~fir_gym.estimators._kalman_linalg.gram`)."""
+    n = out.shape[0]
+    for i in range(n):
+        for j in range(i + 1):
+            for t in range(nb):
+                c = 0.0
+                for k in range(M.shape[1]):
+                    c += M[i, k, t] * M[j, k, t]
+                d = 0.0
+                for k in range(N.shape[1]):
+                    d += N[i, k, t] * N[j, k, t]
+                out[i, j, t] = c + d
+                out[j, i, t] = c + d
+
+
+@jit
+def factored_joseph(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, K: np.ndarray, nb: int,
+                    IKH: np.ndarray, T: np.ndarray, U: np.ndarray, KR: np.ndarray) -> None:
+    """``U = P⁺ = M Mᵀ + N Nᵀ``, ``M = (I − K H) L``, ``N = K L_R`` on blocks (``L``, ``L_R``
+    the semidefinite factors of ``P⁻``, ``R``): the Joseph form from factors, the twin of
+    :func:`~fir_gym.estimators._kalman_linalg.factored_joseph`. ``IKH``, ``T`` (``n x n``)
+    and ``KR`` (``n x m``) are scratch."""
+    n, m = Pm.shape[0], Hs.shape[0]
+    mul(K, Hs, IKH, nb, False)                       # I − K H
+    for i in range(n):
+        for j in range(n):
+            for t in range(nb):
+                IKH[i, j, t] = (1.0 if i == j else 0.0) - IKH[i, j, t]
+    psd_factor(Pm, T, nb)                            # L
+    mul(IKH, T, U, nb, False)                        # M = (I − K H) L, into U for now
+    LR = np.empty((m, m, nb))
+    psd_factor(Rs, LR, nb)
+    mul(K, LR, KR, nb, False)                        # N = K L_R
+    for i in range(n):                               # M out of U (gram writes U)
+        for j in range(n):
+            for t in range(nb):
+                T[i, j, t] = U[i, j, t]
+    gram_lower(T, KR, U, nb)
+
+
+@jit
+def psd_rebuild(P: np.ndarray, T: np.ndarray, nb: int) -> None:
+    """``P ← L Lᵀ`` with ``L`` (into ``T``) the semidefinite factor of ``P`` (lower triangle
+    read), in place on blocks: symmetric PSD by construction — the twin of
+    :func:`~fir_gym.estimators._kalman_linalg.psd_rebuild`."""
+    n = P.shape[0]
+    psd_factor(P, T, nb)
+    for i in range(n):
+        for j in range(i + 1):
+            for t in range(nb):
+                c = 0.0
+                for k in range(n):
+                    c += T[i, k, t] * T[j, k, t]
+                P[i, j, t] = c
+                P[j, i, t] = c

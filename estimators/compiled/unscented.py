@@ -11,7 +11,8 @@ step, in three calls around the two model evaluations (``f`` on the sigma points
 * :func:`predict` — ``x⁻, P⁻ = UT(f(χ)) + G Q Gᵀ`` and the points of the update
   (redrawn from ``x⁻, P⁻`` or the propagated ones);
 * :func:`update` — ``ŷ, S = UT(h(χ⁻)) + R``, ``Pxz``, ``K = Pxz S⁻¹``, ``x⁺ = x⁻ + K (y − ŷ)``,
-  ``P⁺ = P⁻ − K Pxzᵀ`` (symmetrised), then the watch, in place.
+  ``P⁺ = P⁻ − K Pxzᵀ`` (symmetrised, rebuilt through its PSD factor), then the watch, in
+  place.
 
 :func:`cross_moments` is the numpy reference's ``_moments`` + ``_cross`` in one pass:
 with deviations from the first point ``D = Z − Z₀`` (which keeps the α = 1e-3 weights'
@@ -27,7 +28,7 @@ import numpy as np
 
 from . import jit
 from .kalman import finish
-from .linalg import CHUNK, cholesky, load, spd_inverse
+from .linalg import CHUNK, cholesky, load, psd_rebuild, spd_inverse
 
 #: relative tolerance below which negative eigenvalues count as round-off (as the numpy
 #: reference's ``PSD_TOL``)
@@ -216,6 +217,7 @@ def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
     Ss, Ws, L, ok = np.empty((m, m, c)), np.empty((m, m, c)), np.ones((m, m, c)), \
         np.empty(c, dtype=np.bool_)
     K, Pm, Pp = np.empty((n, m, c)), np.empty((n, n, c)), np.empty((n, n, c))
+    Tp = np.empty((n, n, c))
     Xm, E = np.empty((n, c)), np.empty((m, c))
     for b0 in range(0, n_b, c):
         nb = min(c, n_b - b0)
@@ -248,5 +250,6 @@ def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
                     Pp[j, i, t] = s
             for i in range(m):
                 E[i, t] = y[b, i] - y_hat[b, i]
+        psd_rebuild(Pp, Tp, nb)                      # P⁺ through its PSD factor
         finish(b0, nb, Xm, E, valid, ok, K, Ws, Pm, Pp, 0, False, True, x, P, diverged,
                nis_run, nis, limits, logdet)

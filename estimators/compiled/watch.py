@@ -7,7 +7,14 @@ diverged (sticky) where they are not finite, where ``trace P`` exceeds
 ``max_covariance_trace``, or where its NIS has been above the χ² threshold — a NaN
 NIS of a usable measurement counts as above — for ``nis_patience`` steps running.
 
-``limits = [nis_threshold, nis_patience, max_covariance_trace]`` (float64).
+``limits = [nis_threshold, nis_patience, max_covariance_trace]`` (float64), and for the
+windowed filters a fourth entry ``max_estimate``: a system whose new estimate has a
+component beyond it in magnitude is flagged too (the growth bound of
+:mod:`~fir_gym.estimators._consistency`).
+
+:func:`innovation_nis` is the twin of
+:func:`~fir_gym.estimators._consistency.innovation_nis`, the windowed filters' one-step
+innovation test.
 """
 
 from __future__ import annotations
@@ -41,18 +48,21 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
             == nis_run.shape[0] == nis.shape[0] == n_b and nis_new.shape[0] in (0, n_b)):
         raise ValueError("accept: the arrays must have a row per system")
     nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
+    max_abs = limits[3] if limits.shape[0] > 3 else np.inf
     for b in range(n_b):
         finite = True
         trace = 0.0
+        grown = False
         for i in range(n):
             finite = finite and np.isfinite(x_new[b, i])
+            grown = grown or not abs(x_new[b, i]) <= max_abs
             trace += P_new[b, i, i]
             for j in range(n):
                 finite = finite and np.isfinite(P_new[b, i, j])
         q = nis_new[b] if has_nis else np.nan
         nis_run[b], blown = verdict(finite, trace, q, valid[b], has_nis, nis_run[b], nis_limit,
                                     patience, max_trace)
-        if blown:
+        if blown or grown:
             diverged[b] = True
         if finite:
             for i in range(n):
@@ -60,3 +70,92 @@ def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.
                 for j in range(n):
                     P[b, i, j] = P_new[b, i, j]
         nis[b] = q
+
+
+@jit
+def innovation_nis(P: np.ndarray, A: np.ndarray, Qx: np.ndarray, H: np.ndarray,
+                   R: np.ndarray, e: np.ndarray, predict: np.ndarray, valid: np.ndarray,
+                   out: np.ndarray) -> None:
+    """``out[b] = eᵀ S⁻¹ e``, ``S = H P⁻ Hᵀ + R``, ``P⁻ = A P Aᵀ + Qx`` (``P`` where ``predict``
+    is False) for every system; NaN where ``valid`` is False or ``S`` is not positive
+    definite. Shapes as the reference's (``R`` 2-D); a leading axis of length 1 is shared.
+    ``S⁻¹`` as there: closed form for ``p <= 2`` (PD test ``s11 > 0, det > 0``), else
+    Cholesky. The two products are written out with plain indices: per-system views or a
+    helper call cost several times the 2 x 2 algebra (700 ns against 110 ns a system)."""
+    n_b, n = P.shape[0], P.shape[1]
+    p = H.shape[1]
+    AP, Pm, HP = np.empty((n, n)), np.empty((n, n)), np.empty((p, n))
+    S, L, z = np.empty((p, p)), np.empty((p, p)), np.empty(p)
+    for b in range(n_b):
+        if not valid[b]:
+            out[b] = np.nan
+            continue
+        ab = b if A.shape[0] > 1 else 0
+        qb = b if Qx.shape[0] > 1 else 0
+        hb = b if H.shape[0] > 1 else 0
+        if predict[b]:                                  # P⁻ = (A P) Aᵀ + Qx
+            for i in range(n):
+                for j in range(n):
+                    c = 0.0
+                    for k in range(n):
+                        c += A[ab, i, k] * P[b, k, j]
+                    AP[i, j] = c
+            for i in range(n):
+                for j in range(n):
+                    c = 0.0
+                    for k in range(n):
+                        c += AP[i, k] * A[ab, j, k]
+                    Pm[i, j] = c + Qx[qb, i, j]
+        else:
+            for i in range(n):
+                for j in range(n):
+                    Pm[i, j] = P[b, i, j]
+        for i in range(p):                              # S = (H P⁻) Hᵀ + R
+            for j in range(n):
+                c = 0.0
+                for k in range(n):
+                    c += H[hb, i, k] * Pm[k, j]
+                HP[i, j] = c
+        for i in range(p):
+            for j in range(p):
+                c = 0.0
+                for k in range(n):
+                    c += HP[i, k] * H[hb, j, k]
+                S[i, j] = c + R[i, j]
+        for i in range(p):                              # symmetrised
+            for j in range(i):
+                v = 0.5 * (S[i, j] + S[j, i])
+                S[i, j] = v
+                S[j, i] = v
+        if p == 1:
+            out[b] = e[b, 0] * (1.0 / S[0, 0]) * e[b, 0] if S[0, 0] > 0.0 else np.nan
+        elif p == 2:
+            a, c, d = S[0, 0], S[0, 1], S[1, 1]
+            det = a * d - c * c
+            if a > 0.0 and det > 0.0:
+                w00, w11, w01 = d / det, a / det, -c / det
+                e0, e1 = e[b, 0], e[b, 1]
+                out[b] = e0 * (w00 * e0 + w01 * e1) + e1 * (w01 * e0 + w11 * e1)
+            else:
+                out[b] = np.nan
+        else:                                           # Cholesky: NIS = |L⁻¹ e|²
+            ok = True
+            for j in range(p):
+                d = S[j, j]
+                for k in range(j):
+                    d -= L[j, k] * L[j, k]
+                ok = ok and d > 0.0
+                L[j, j] = np.sqrt(d) if d > 0.0 else 1.0
+                for i in range(j + 1, p):
+                    c = S[i, j]
+                    for k in range(j):
+                        c -= L[i, k] * L[j, k]
+                    L[i, j] = c / L[j, j]
+            q = 0.0
+            for i in range(p):
+                c = e[b, i]
+                for k in range(i):
+                    c -= L[i, k] * z[k]
+                z[i] = c / L[i, i]
+                q += z[i] * z[i]
+            out[b] = q if ok else np.nan

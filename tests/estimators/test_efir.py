@@ -90,15 +90,19 @@ def test_batch_in_lockstep_equals_separate_filters() -> None:
 
 
 def test_rank_deficient_linearisation_flags_and_predicts() -> None:
-    # y = x1·x2 seen from a nominal with x2 = 0 carries no information on x1
-    model = StateSpaceModel(f=lambda x, u: x.copy(), h=lambda x: x[..., :1] * x[..., 1:],
+    # y = x1·x2 seen from a nominal with x2 = 0 carries no information on x1. The nominal
+    # starts at x2 = 1 and drains to x2 = 0 in four steps (a nominal unobservable from the
+    # start is refused at construction: test_the_observability_rule_* below)
+    def draining(x, u):
+        return np.concatenate([x[..., :1], np.maximum(x[..., 1:] - 0.25, 0.0)], axis=-1)
+    model = StateSpaceModel(f=draining, h=lambda x: x[..., :1] * x[..., 1:],
                             Q=1e-4 * np.eye(2), R=[[0.01]])
-    f = ExtendedFIRFilter(model, horizon=4, x0=[1.0, 0.0])
-    for _ in range(8):
+    f = ExtendedFIRFilter(model, horizon=4, x0=[1.0, 1.0])
+    for _ in range(12):
         prev = f.x
         x = f.step([0.0])
     assert f.last_info["rank_deficient"] and not f.last_info["startup"]
-    assert np.allclose(x, prev)                                # f(x̂) = x̂ here
+    assert np.allclose(x, draining(prev, None))                # the fallback: f(x̂)
 
 
 # ---------------------------------------------------------------------------- Orbit-v0

@@ -5,23 +5,13 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from applicable import APPLICABLE
 from gymnasium.utils.env_checker import check_env
 
 import fir_gym  # noqa: F401
 from fir_gym.estimators import estimator_names
 from fir_gym.wrappers import EstimatorObservation
 
-#: the filters that apply to each plant (linear-only filters need a LinearModel;
-#: continuous ones a continuous_model). The FIR smoother estimates x(k-N+1), not the
-#: current state, so it is not a controller's observation.
-APPLICABLE = {
-    "fir_gym/Orbit-v0": ["ekf", "ukf", "lkf", "efir"],
-    "fir_gym/UncertainOscillator-v0": ["ekf", "ukf", "lkf", "efir"],
-    "fir_gym/CarrierMotion-v0": ["kf", "ekf", "ukf", "lkf", "efir", "fir", "ufir", "rfir",
-                                 "cd-ekf", "bpf-kf"],
-    "fir_gym/VanDerPol-v0": ["ekf", "ukf", "lkf", "efir", "cd-ekf", "bpf-kf"],
-    "fir_gym/PendulumSlider-v0": ["ekf", "ukf", "lkf", "efir"],
-}
 CASES = [(env_id, name) for env_id, names in APPLICABLE.items() for name in names]
 EXPECTED_WARNINGS = ("minimum value is -infinity", "maximum value is infinity")
 
