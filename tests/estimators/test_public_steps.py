@@ -12,13 +12,13 @@ import pickle
 import numpy as np
 import pytest
 from compiled_paths import on_path
+from plant_cases import kalman_filters
 from sequence_data import tracking
 
 from fir_gym.estimators import (
     ExtendedKalmanFilter,
     FIRFilter,
     KalmanFilter,
-    LinearizedKalmanFilter,
     LinearModel,
     StateSpaceModel,
     UnscentedKalmanFilter,
@@ -26,7 +26,7 @@ from fir_gym.estimators import (
 
 fk = pytest.importorskip("filterpy.kalman")
 
-KALMAN = [KalmanFilter, ExtendedKalmanFilter, LinearizedKalmanFilter, UnscentedKalmanFilter]
+KALMAN = kalman_filters()
 
 
 def filterpy_kf(model: LinearModel) -> object:

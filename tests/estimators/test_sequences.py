@@ -12,15 +12,13 @@ import numpy as np
 import pytest
 import scipy.stats
 from compiled_paths import needs_twins, numpy_path, on_path
-from plant_cases import applicable
+from plant_cases import applicable, kalman_filters
 from sequence_data import pykalman_robot, robot, tracking
 
 from fir_gym.estimators import (
     ExtendedFIRFilter,
-    ExtendedKalmanFilter,
     FIRFilter,
     KalmanFilter,
-    LinearizedKalmanFilter,
     LinearModel,
     RecursiveFIRFilter,
     UFIRFilter,
@@ -29,7 +27,7 @@ from fir_gym.estimators import (
 
 pykalman = pytest.importorskip("pykalman")
 
-KALMAN = [KalmanFilter, ExtendedKalmanFilter, LinearizedKalmanFilter, UnscentedKalmanFilter]
+KALMAN = kalman_filters()
 FIR = [FIRFilter, UFIRFilter, RecursiveFIRFilter, ExtendedFIRFilter]
 
 

@@ -22,3 +22,15 @@ def applicable() -> list[tuple[str, str]]:
             cases += [(env_id, name) for name, _, _ in _applicable(env)]
             env.close()
     return cases
+
+
+def kalman_filters() -> list[type]:
+    """The Kalman-family classes that share the sequence, smoother and public-step API."""
+    from fir_gym.estimators import (
+        ExtendedKalmanFilter,
+        KalmanFilter,
+        LinearizedKalmanFilter,
+        UnscentedKalmanFilter,
+    )
+
+    return [KalmanFilter, ExtendedKalmanFilter, LinearizedKalmanFilter, UnscentedKalmanFilter]
