@@ -8,8 +8,6 @@ from typing import Any
 
 import numpy as np
 
-from fir_gym.training import learning_curve
-
 from ._axes import axes_for
 
 RunDirs = str | Path | Sequence[str | Path]
@@ -30,6 +28,10 @@ def plot_learning_curves(runs: RunDirs | Mapping[str, RunDirs], *, bins: int = 2
     A run with no finished training episode has no curve and is listed as such in
     the legend's place. Returns the :class:`matplotlib.figure.Figure` drawn on.
     """
+    # imported here: fir_gym.training loads stable-baselines3 and PyTorch (the rl extra),
+    # which the other plots, and fir-gym reproduce's figures, do without
+    from fir_gym.training import learning_curve
+
     groups = _groups(runs)
     fig, (panel,) = axes_for(1, ax, height=3.5)
     empty = []

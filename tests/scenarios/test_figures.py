@@ -18,7 +18,8 @@ REPO = Path(__file__).resolve().parents[2]
 def test_importing_the_scenarios_and_drawing_leaves_the_backend(tmp_path):
     """In a fresh interpreter whose backend is svg (so a switch to Agg would show) and whose
     ``matplotlib.use`` raises: import every scenario module, run paper 002's quick experiment
-    and write its figure."""
+    and write its figure. Neither loads stable-baselines3 or PyTorch (``fir-gym reproduce``
+    runs on the base install, and each of its workers would carry them)."""
     code = f"""
 import importlib, sys
 import matplotlib
@@ -35,11 +36,13 @@ paper002.plot(report, {str(tmp_path)!r})
 assert report.images, "no figure written"
 pyplot = sys.modules.get("matplotlib.pyplot")
 print(matplotlib.get_backend(), 0 if pyplot is None else len(pyplot.get_fignums()))
+# the reproduction's figures need only the base install: no rl extra is loaded
+print([m for m in ("torch", "stable_baselines3", "fir_gym.training") if m in sys.modules])
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          cwd=tmp_path)                 # the installed fir_gym, not the source
     assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split() == ["svg", "0"]
+    assert out.stdout.splitlines() == ["svg 0", "[]"]
     assert (tmp_path / "figures" / "paper002_fig1_vdp.png").stat().st_size > 10_000
 
 
