@@ -41,6 +41,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .scenarios import SCENARIOS, episodes
+    from .scenarios.figures import save_figures, with_figures
     from .scenarios.plan import execute
     from .scenarios.report import vocabulary, write_report
     from .scenarios.runner import Runner
@@ -52,20 +53,26 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     # the runner first: a missing extra (--backend dask) fails before any work is done
     with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
                 progress=not args.no_progress) as runner:
+        names = [f"fir_gym.scenarios.{name}" for name in wanted]
+        drawing = ["fir_gym.scenarios.figures", "fir_gym.plotting"] if out else []
+        # the workers start and import the scenarios (and the plotting) while this process
+        # does the same: their start-up is off the critical path
+        runner.start(["fir_gym.scenarios.episodes", *names, *drawing])
         if out:
             out.mkdir(parents=True, exist_ok=True)
-        modules = [importlib.import_module(f"fir_gym.scenarios.{name}") for name in wanted]
-        plans = [episodes.plan(seed=args.seed)] + [
-            m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
+        modules = [importlib.import_module(name) for name in names]
+        plans = [m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
+        if out:      # each scenario's figures: a task of the runner once its report is final
+            plans = [with_figures(p, name) for p, name in zip(plans, wanted, strict=True)]
         # every scenario's tasks in one map per stage: the workers stay busy across scenarios
-        summaries, *reports = execute(plans, runner, desc="reproduce")
+        summaries, *done = execute([episodes.plan(seed=args.seed), *plans], runner,
+                                   desc="reproduce")
+    reports = [save_figures(d, out) for d in done] if out else done
     headers, rows = episodes.summary_rows(summaries)
     print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
     print(f"Scripted episodes (one per environment, seed {args.seed})\n")
     print(format_table(headers, rows, markdown=args.markdown))
-    for module, report in zip(modules, reports, strict=True):
-        if out and hasattr(module, "plot"):
-            module.plot(report, out)
+    for report in reports:
         print("\n" + report.to_text(markdown=args.markdown))
     if out:
         path = write_report(out, reports, episodes_table=(headers, rows))

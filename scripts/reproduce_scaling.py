@@ -2,13 +2,16 @@
 """Time ``fir-gym reproduce`` serially, on two joblib workers and on a two-worker Dask cluster.
 
     python scripts/reproduce_scaling.py [--quick] [--cold] [--backends serial,joblib,dask]
-                                        [--out DIR] [--no-figures]
+                                        [--repeat N] [--out DIR] [--no-figures]
     python scripts/reproduce_scaling.py --model [--quick] [--workers 2]
 
 Each backend runs back to back in a fresh process (``python -m fir_gym.cli reproduce``,
 imports and kernel loading included), the load average is printed before each run,
 and the speed-ups are the serial wall time over each backend's, measured in the same
-call. The REPORT.md files are compared byte for byte. ``--cold`` first deletes the
+call. With ``--repeat N`` the backends take turns N times (serial, joblib, dask, serial,
+...), so that a slow spell of a shared or virtual machine falls on all of them, and
+the speed-ups are the ratios of the median wall times (each round's ratios are printed
+too). The REPORT.md files and the figures are compared byte for byte. ``--cold`` first deletes the
 numba cache (the ``*.nbi``/``*.nbc`` files under the installed ``fir_gym.estimators``
 and ``fir_gym.envs``), so the first run also compiles the kernels. Timings on a shared
 machine are depressed in proportion to its load: read the ratios with the load beside
@@ -18,14 +21,15 @@ them.
 process, records each one's CPU time (which the load barely changes), and schedules
 them on ``--workers`` ideal workers in the order the runner hands them out (costliest
 first, each to the first free worker, one map per stage), adding the client's own CPU
-time (imports, assembly, figures). The ratio is the speed-up an idle machine would give,
-before the workers' start-up.
+time (imports, assembly). The figures are tasks too, as in ``fir-gym reproduce --out``.
+The ratio is the speed-up an idle machine would give, before the workers' start-up.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -71,6 +75,7 @@ def model(quick: bool, workers: int) -> None:
     import importlib
 
     from fir_gym.scenarios import SCENARIOS, episodes
+    from fir_gym.scenarios.figures import with_figures
     from fir_gym.scenarios.plan import execute
     from fir_gym.scenarios.runner import Runner
 
@@ -88,14 +93,11 @@ def model(quick: bool, workers: int) -> None:
 
     start = time.process_time()
     modules = [importlib.import_module(f"fir_gym.scenarios.{n}") for n in SCENARIOS]
-    plans = [episodes.plan(0)] + [m.plan(seed=0, quick=quick) for m in modules]
+    plans = [episodes.plan(0)] + [with_figures(m.plan(seed=0, quick=quick), n)
+                                  for m, n in zip(modules, SCENARIOS, strict=True)]
     t0 = time.process_time()
-    reports = execute(plans, Timing())[1:]
+    execute(plans, Timing())
     t1 = time.process_time()
-    with tempfile.TemporaryDirectory() as tmp:
-        for m, r in zip(modules, reports, strict=True):
-            m.plot(r, tmp)
-    t2 = time.process_time()
 
     def makespan(times: list[float]) -> float:
         free = [0.0] * workers
@@ -104,10 +106,10 @@ def model(quick: bool, workers: int) -> None:
         return max(free)
 
     tasks = sum(map(sum, stages))
-    client = (t0 - start) + (t1 - t0 - tasks) + (t2 - t1)
+    client = (t0 - start) + (t1 - t0 - tasks)
     serial, parallel = client + tasks, client + sum(map(makespan, stages))
     print(f"tasks {sum(map(len, stages))} in {len(stages)} stages: {tasks:.1f} s CPU; client "
-          f"(imports, assembly, figures) {client:.1f} s")
+          f"(imports, assembly) {client:.1f} s")
     print(f"modelled serial {serial:.1f} s, {workers} workers {parallel:.1f} s: speed-up "
           f"{serial / parallel:.2f}x (before the workers' start-up)")
 
@@ -117,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="fir-gym reproduce --quick")
     p.add_argument("--cold", action="store_true", help="clear the numba cache first")
     p.add_argument("--backends", default="serial,joblib,dask")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="rounds of the backends in turn; medians are compared (default 1)")
     p.add_argument("--out", default=None, help="where the reports go (default: a temp dir)")
     p.add_argument("--no-figures", action="store_true",
                    help="no --out for fir-gym: time the computation and the text report only")
@@ -131,21 +135,35 @@ def main(argv: list[str] | None = None) -> int:
     root = Path(args.out or tempfile.mkdtemp(prefix="fir-gym-scaling-"))
     if args.cold:
         print(f"cleared {clear_numba_cache()} cached kernel files")
-    walls: dict[str, float] = {}
-    for b in backends:
-        load = os.getloadavg()
-        walls[b] = run(b, root / b, args.quick, not args.no_figures)
-        print(f"{b:7s} {walls[b]:7.1f} s   (load average before: {load[0]:.2f} {load[1]:.2f} "
-              f"{load[2]:.2f} on {os.cpu_count()} CPUs)", flush=True)
-    reports = {b: (root / b / "REPORT.md").read_bytes() for b in backends}
-    same = len(set(reports.values())) == 1
+    walls: dict[str, list[float]] = {b: [] for b in backends}
+    for round_ in range(args.repeat):
+        for b in backends:
+            load = os.getloadavg()
+            walls[b].append(run(b, root / b, args.quick, not args.no_figures))
+            print(f"{b:7s} {walls[b][-1]:7.1f} s   (load average before: {load[0]:.2f} "
+                  f"{load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs)", flush=True)
+        if args.repeat > 1 and "serial" in walls:
+            print(f"round {round_ + 1}: " + ", ".join(
+                f"{b} {walls['serial'][-1] / walls[b][-1]:.2f}x" for b in backends
+                if b != "serial"), flush=True)
+    same = len({_outputs(root / b) for b in backends}) == 1
+    median = {b: statistics.median(w) for b, w in walls.items()}
+    if args.repeat > 1:
+        print("median wall: " + ", ".join(f"{b} {median[b]:.1f} s" for b in backends))
     if "serial" in walls:
         for b in backends:
             if b != "serial":
                 print(f"speed-up {b} ({JOBS} workers) over serial: "
-                      f"{walls['serial'] / walls[b]:.2f}x")
-    print(f"REPORT.md identical on {', '.join(backends)}: {same}   ({root})")
+                      f"{median['serial'] / median[b]:.2f}x")
+    what = "REPORT.md" if args.no_figures else "REPORT.md and figures"
+    print(f"{what} identical on {', '.join(backends)}: {same}   ({root})")
     return 0 if same else 1
+
+
+def _outputs(folder: Path) -> tuple[tuple[str, bytes], ...]:
+    """Every file a run wrote (REPORT.md, the figures), path and bytes."""
+    return tuple((str(p.relative_to(folder)), p.read_bytes())
+                 for p in sorted(folder.rglob("*")) if p.is_file())
 
 
 if __name__ == "__main__":

@@ -95,6 +95,16 @@ def gather(plans: Sequence[Any], then: Callable[[list[Any]], Any], desc: str = "
                  desc=desc or ", ".join(dict.fromkeys(plans[i].desc for i in open_)))
 
 
+def followed_by(plan: Any, task: Callable[[Any], Task]) -> Any:
+    """``plan``, then one more task made from its final value by ``task(value)``: the final
+    value becomes ``(value, result)``. The task joins the next map of :func:`execute`, beside
+    the tasks of plans still running (a scenario's figures: :mod:`.figures`)."""
+    if isinstance(plan, Stage):
+        return Stage(plan.tasks, lambda results: followed_by(plan.then(results), task),
+                     desc=plan.desc)
+    return Stage([task(plan)], lambda out: (plan, out[0]))
+
+
 def run_plan(plan: Any, runner: Runner | None = None) -> Any:
     """``execute([plan], runner)[0]``: one scenario on its own."""
     return execute([plan], runner)[0]

@@ -12,8 +12,10 @@ so the same seeds give bit-identical numbers serially, with joblib and on Dask.
 
 from __future__ import annotations
 
+import importlib
 import os
-from collections.abc import Callable, Iterable
+import threading
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from fir_gym.estimators._validation import one_of
@@ -54,13 +56,48 @@ class Runner:
         self.blas_threads = blas_threads
         self._client: Any = None
         self._cluster: Any = None
+        self._warming: threading.Thread | None = None
+        self._warm_error: BaseException | None = None
+
+    def start(self, modules: Sequence[str] = ()) -> None:
+        """Start the workers now, in the background, each importing ``modules``.
+
+        A worker's start-up (spawning, importing the scenarios and their estimators)
+        then overlaps the client's own imports and planning instead of delaying the
+        first :meth:`map`, which waits for it. Serially it does nothing. A failure
+        here (a missing extra, an unreachable scheduler) is raised by that first map.
+        """
+        if self.backend == "serial" or self._warming is not None:
+            return
+        if self.backend == "joblib" and self._n_jobs() == 1:
+            return
+        if self.backend == "joblib":
+            import joblib  # noqa: F401  (imported here, not in the thread)
+
+        def warm() -> None:
+            try:
+                if self.backend == "joblib":
+                    self._map_now(import_modules, [tuple(modules)] * self._n_jobs(), None)
+                else:
+                    self._dask_client().run(import_modules, tuple(modules))
+            except BaseException as err:   # handed to the first map, in the caller's thread
+                self._warm_error = err
+
+        self._warming = threading.Thread(target=warm, name="fir-gym runner start",
+                                         daemon=True)
+        self._warming.start()
 
     def map(self, fn: Callable[[Any], Any], items: Iterable[Any], *, desc: str | None = None
             ) -> list[Any]:
         """``[fn(item) for item in items]``, in order, on the chosen backend."""
         items = list(items)
+        self._wait_for_start()
         if not items:
             return []
+        return self._map_now(fn, items, desc)
+
+    def _map_now(self, fn: Callable[[Any], Any], items: list[Any], desc: str | None
+                 ) -> list[Any]:
         if self.backend == "serial" or (self.backend == "joblib" and self._n_jobs() == 1):
             return [fn(item) for item in self._bar(items, desc)]
         if self.blas_threads is not None:
@@ -82,6 +119,8 @@ class Runner:
 
     def close(self) -> None:
         """Shut down a local Dask cluster started by this runner."""
+        if self._warming is not None:
+            self._warming.join()
         if self._client is not None:
             self._client.close()
             self._client = None
@@ -100,6 +139,14 @@ class Runner:
                 f"scheduler={self.scheduler!r})")
 
     # ------------------------------------------------------------------ helpers
+    def _wait_for_start(self) -> None:
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
+        if self._warm_error is not None:
+            err, self._warm_error = self._warm_error, None
+            raise err
+
     def _n_jobs(self) -> int:
         return self.jobs or os.cpu_count() or 1
 
@@ -139,6 +186,12 @@ class LimitedBlas:
 
         with threadpool_limits(limits=self.threads, user_api="blas"):
             return self.fn(item)
+
+
+def import_modules(modules: Sequence[str]) -> None:
+    """Import ``modules`` in this process (:meth:`Runner.start`'s task for each worker)."""
+    for name in modules:
+        importlib.import_module(name)
 
 
 def seeded_normals(task: tuple[int, float]) -> Any:

@@ -58,3 +58,21 @@ def test_no_scenario_module_selects_a_backend(path):
         if isinstance(node, (ast.Import, ast.ImportFrom)):
             names = [a.name for a in node.names] + [getattr(node, "module", None) or ""]
             assert not any("pyplot" in n for n in names), f"{path.name} imports pyplot"
+
+
+def test_a_figure_task_draws_what_plot_writes(tmp_path):
+    """``draw_task`` (run by a worker) hands back the bytes ``plot`` writes into a folder,
+    and ``save_figures`` writes them and records the same images in the report."""
+    from fir_gym.scenarios import paper002
+    from fir_gym.scenarios.figures import draw_task, save_figures, with_figures
+    from fir_gym.scenarios.plan import run_plan
+
+    direct = paper002.run(quick=True, runs=2)
+    paper002.plot(direct, tmp_path / "direct")
+    done = run_plan(with_figures(paper002.plan(quick=True, runs=2), "paper002"))
+    report = save_figures(done, tmp_path / "task")
+    assert report.images == direct.images and report.images
+    for path in direct.images.values():
+        assert (tmp_path / "task" / path).read_bytes() == (tmp_path / "direct" / path).read_bytes()
+    images, files = draw_task(("paper002", direct))
+    assert images == direct.images and set(files) == set(direct.images.values())

@@ -128,17 +128,20 @@ def _reproduce(tmp_path, backend):
     if backend != "serial":
         args += ["--backend", backend, "--jobs", "2"]
     assert main(args) == 0
-    return (out / "REPORT.md").read_bytes()
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
 
 
 def test_the_quick_reproduction_is_byte_identical_on_every_backend(tmp_path, capsys):
     """Every task carries its own seed and the task split never depends on the backend, so
     the whole REPORT.md is the same bytes serially, on two joblib workers and on a two-worker
-    local Dask cluster."""
+    local Dask cluster; so are the figures, which the workers draw and the client writes."""
     pytest.importorskip("distributed")
     serial = _reproduce(tmp_path, "serial")
+    assert sum(name.endswith(".png") for name in serial) >= len(SCENARIOS)
     assert _reproduce(tmp_path, "joblib") == serial
     assert _reproduce(tmp_path, "dask") == serial
-    text = serial.decode()
+    text = serial["REPORT.md"].decode()
+    for name in serial:                           # every figure written is in the report
+        assert name == "REPORT.md" or f"]({name})" in text
     assert "## Verdicts" in text and text.count("\n## Paper ") == len(SCENARIOS) - 1
     assert "## Beyond the papers" in text

@@ -4,7 +4,7 @@ local Dask cluster; stages of several plans mapped together, results back in tas
 import numpy as np
 import pytest
 
-from fir_gym.scenarios.plan import Stage, Task, execute, gather, run_plan
+from fir_gym.scenarios.plan import Stage, Task, execute, followed_by, gather, run_plan
 from fir_gym.scenarios.runner import Runner, blas_threads
 from fir_gym.scenarios.runner import seeded_normals as noisy_task
 
@@ -98,3 +98,38 @@ def test_plans_give_the_serial_numbers_on_joblib_and_dask():
             for mine, ref in zip(execute([_two_stage(3), _two_stage(4)], runner), serial,
                                  strict=True):
                 np.testing.assert_array_equal(mine[1], ref[1])
+
+
+def test_followed_by_runs_one_more_task_beside_the_plans_still_running():
+    """A one-stage plan's extra task joins the second map, with the two-stage plan's second
+    stage; the final value is the plan's value and the task's result."""
+    one = Stage([Task(noisy_task, (1, 1.0))], lambda out: out[0])
+    runner = Recording()
+    extra, deep = execute([followed_by(one, lambda v: Task(noisy_task, (2, float(v.sum())))),
+                           _two_stage(5)], runner)
+    assert [len(c) for c in runner.calls] == [4, 2]
+    np.testing.assert_array_equal(extra[0], noisy_task((1, 1.0)))
+    np.testing.assert_array_equal(extra[1], noisy_task((2, float(noisy_task((1, 1.0)).sum()))))
+    assert deep[0] == "done"
+    value, result = run_plan(followed_by("final", lambda v: Task(len, v)))
+    assert (value, result) == ("final", 5)
+
+
+@pytest.mark.parametrize("backend", ["joblib", "dask"])
+def test_start_warms_the_workers_and_the_first_map_waits_for_it(backend):
+    """``start`` imports the modules on the workers in the background; the numbers of the
+    maps after it are the serial ones, and a module that cannot be imported fails the
+    first map (in the caller's thread), not silently."""
+    if backend == "dask":
+        pytest.importorskip("distributed")
+    serial = Runner("serial").map(noisy_task, TASKS)
+    with Runner(backend, jobs=2) as runner:
+        runner.start(["fir_gym.scenarios.plan", "json"])
+        for a, b in zip(runner.map(noisy_task, TASKS), serial, strict=True):
+            np.testing.assert_array_equal(a, b)
+    with Runner(backend, jobs=2) as runner:
+        runner.start(["fir_gym.no_such_module"])
+        with pytest.raises(ModuleNotFoundError, match="no_such_module"):
+            runner.map(noisy_task, TASKS)
+        assert len(runner.map(noisy_task, TASKS)) == len(TASKS)     # reported once
+    Runner("serial").start(["fir_gym.no_such_module"])             # serially: nothing to do
