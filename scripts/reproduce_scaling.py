@@ -4,6 +4,7 @@
     python scripts/reproduce_scaling.py [--quick] [--cold] [--backends serial,joblib,dask]
                                         [--repeat N] [--out DIR] [--no-figures]
     python scripts/reproduce_scaling.py --model [--quick] [--workers 2]
+    python scripts/reproduce_scaling.py --ceiling
 
 Each backend runs back to back in a fresh process (``python -m fir_gym.cli reproduce``,
 imports and kernel loading included), the load average is printed before each run,
@@ -114,6 +115,53 @@ def model(quick: bool, workers: int) -> None:
           f"{serial / parallel:.2f}x (before the workers' start-up)")
 
 
+def _quick_tasks() -> list:  # type: ignore[type-arg]
+    """The first-stage tasks of the quick reproduction (the work of the ceiling)."""
+    import importlib
+
+    from fir_gym.scenarios import SCENARIOS
+
+    plans = [importlib.import_module(f"fir_gym.scenarios.{n}").plan(seed=0, quick=True)
+             for n in SCENARIOS]
+    return [t for p in plans for t in p.tasks]
+
+
+def _run_tasks(_: int) -> float:
+    """Run :func:`_quick_tasks` in this process; its wall time."""
+    from threadpoolctl import threadpool_limits
+
+    from fir_gym.scenarios.plan import run_task
+
+    tasks = _quick_tasks()
+    with threadpool_limits(limits=1, user_api="blas"):
+        start = time.perf_counter()
+        for task in tasks:
+            run_task(task)
+        return time.perf_counter() - start
+
+
+def ceiling() -> None:
+    """How much faster two processes get through twice the work than one through once.
+
+    Two worker processes first run the quick reproduction's tasks once each (imports,
+    kernels loaded: untimed); then one worker runs them alone, then both run them at
+    the same time. ``2 × alone / together`` is the most two workers can give on this
+    machine for this work whatever the runner does: below 2 when the two CPUs share a
+    physical core, memory bandwidth or a host's time.
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(2) as pool:
+        list(pool.map(_run_tasks, [0, 1]))                       # warm, untimed
+        alone = pool.submit(_run_tasks, 0).result()
+        start = time.perf_counter()
+        list(pool.map(_run_tasks, [0, 1]))
+        together = time.perf_counter() - start
+    print(f"the quick reproduction's tasks: one process alone {alone:.1f} s; two processes, "
+          f"each the same work at once, {together:.1f} s; two-worker ceiling "
+          f"{2 * alone / together:.2f}x")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fir-gym reproduce --quick")
@@ -127,9 +175,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", action="store_true",
                    help="per-task CPU times scheduled on ideal workers (module docstring)")
     p.add_argument("--workers", type=int, default=JOBS, help="workers of --model")
+    p.add_argument("--ceiling", action="store_true",
+                   help="the machine's two-process ceiling for this work (ceiling())")
     args = p.parse_args(argv)
     if args.model:
         model(args.quick, args.workers)
+        return 0
+    if args.ceiling:
+        ceiling()
         return 0
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
     root = Path(args.out or tempfile.mkdtemp(prefix="fir-gym-scaling-"))

@@ -15,12 +15,18 @@ from __future__ import annotations
 import importlib
 import os
 import threading
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from fir_gym.estimators._validation import one_of
 
 BACKENDS = ("serial", "joblib", "dask")
+
+#: the Dask configuration of the workers of a local cluster the runner starts
+LOCAL_WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                       "distributed.worker.memory.monitor-interval": "1s",
+                       "distributed.admin.system-monitor.interval": "2s"}
 
 
 class Runner:
@@ -109,7 +115,11 @@ class Runner:
             out = parallel(delayed(fn)(item) for item in items)
             return list(self._bar(out, desc, total=len(items)))
         client = self._dask_client()
-        futures = client.map(fn, items, pure=False)
+        with warnings.catch_warnings():
+            # each task's argument is its own data, sent once: dask's advice to scatter
+            # large graphs does not apply
+            warnings.filterwarnings("ignore", message="Sending large graph")
+            futures = client.map(fn, items, pure=False)
         if self.progress:
             from distributed import as_completed
 
@@ -157,8 +167,14 @@ class Runner:
             if self.scheduler:
                 self._client = Client(self.scheduler)
             else:
-                self._cluster = LocalCluster(n_workers=self.jobs or 2, threads_per_worker=1,
-                                             processes=True, dashboard_address=None)
+                import dask
+
+                # the tasks are seconds of CPU each: a worker's statistical profiler (a
+                # stack sample every 10 ms) and its 0.1 s memory monitor only take the GIL
+                # from them
+                with dask.config.set(LOCAL_WORKER_CONFIG):
+                    self._cluster = LocalCluster(n_workers=self.jobs or 2, threads_per_worker=1,
+                                                 processes=True, dashboard_address=None)
                 self._client = Client(self._cluster)
         return self._client
 
