@@ -32,16 +32,13 @@ def test_dask_local_cluster_agrees_bit_for_bit():
     with Runner("dask", jobs=2) as runner:
         distributed = runner.map(noisy_task, TASKS)
         # the local cluster's workers run without the statistical profiler
-        profiling = runner._dask_client().run(_profiler_enabled)
+        import dask
+
+        profiling = runner._dask_client().run(dask.config.get,
+                                              "distributed.worker.profile.enabled")
         assert len(profiling) == 2 and not any(profiling.values())
     for a, b in zip(serial, distributed, strict=True):
         np.testing.assert_array_equal(a, b)
-
-
-def _profiler_enabled():
-    import dask
-
-    return dask.config.get("distributed.worker.profile.enabled")
 
 
 def test_bad_arguments():
