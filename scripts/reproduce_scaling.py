@@ -11,10 +11,12 @@ imports and kernel loading included), the load average is printed before each ru
 and the speed-ups are the serial wall time over each backend's, measured in the same
 call. With ``--repeat N`` the backends take turns N times (serial, joblib, dask, serial,
 ...), so that a slow spell of a shared or virtual machine falls on all of them, and
-the speed-ups are the ratios of the median wall times (each round's ratios are printed
-too). The REPORT.md files and the figures are compared byte for byte. ``--cold`` first deletes the
-numba cache (the ``*.nbi``/``*.nbc`` files under the installed ``fir_gym.estimators``
-and ``fir_gym.envs``), so the first run also compiles the kernels. Timings on a shared
+a backend's speed-up is the median over the rounds of the round's serial wall time over
+the backend's (the runs of a round are minutes apart and share the machine's state;
+the spread and the ratio of the median wall times are printed too). The REPORT.md
+files and the figures are compared byte for byte. ``--cold`` first deletes the numba
+cache (the ``*.nbi``/``*.nbc`` files under the installed ``fir_gym.estimators`` and
+``fir_gym.envs``), so the first run also compiles the kernels. Timings on a shared
 machine are depressed in proportion to its load: read the ratios with the load beside
 them.
 
@@ -206,8 +208,12 @@ def main(argv: list[str] | None = None) -> int:
     if "serial" in walls:
         for b in backends:
             if b != "serial":
+                rounds = [s / w for s, w in zip(walls["serial"], walls[b], strict=True)]
+                spread = (f" (rounds {min(rounds):.2f}-{max(rounds):.2f}x; median serial over "
+                          f"median {b}: {median['serial'] / median[b]:.2f}x)"
+                          if args.repeat > 1 else "")
                 print(f"speed-up {b} ({JOBS} workers) over serial: "
-                      f"{median['serial'] / median[b]:.2f}x")
+                      f"{statistics.median(rounds):.2f}x{spread}")
     what = "REPORT.md" if args.no_figures else "REPORT.md and figures"
     print(f"{what} identical on {', '.join(backends)}: {same}   ({root})")
     return 0 if same else 1
