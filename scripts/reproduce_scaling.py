@@ -66,6 +66,8 @@ def run(backend: str, out: Path, quick: bool, figures: bool) -> float:
     wall = time.perf_counter() - start
     if done.returncode:
         raise SystemExit(f"{backend} failed:\n{done.stderr[-2000:]}")
+    with open(out.parent / f"{backend}.stderr", "a") as log:   # warnings, worker restarts
+        log.write(done.stderr)
     if not figures:                                    # the text report on stdout
         out.mkdir(parents=True, exist_ok=True)
         (out / "REPORT.md").write_text(done.stdout)
