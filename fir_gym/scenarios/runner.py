@@ -73,9 +73,7 @@ class Runner:
         first :meth:`map`, which waits for it. Serially it does nothing. A failure
         here (a missing extra, an unreachable scheduler) is raised by that first map.
         """
-        if self.backend == "serial" or self._warming is not None:
-            return
-        if self.backend == "joblib" and self._n_jobs() == 1:
+        if self._in_process() or self._warming is not None:
             return
         if self.backend == "joblib":
             import joblib  # noqa: F401  (imported here, not in the thread)
@@ -104,7 +102,7 @@ class Runner:
 
     def _map_now(self, fn: Callable[[Any], Any], items: list[Any], desc: str | None
                  ) -> list[Any]:
-        if self.backend == "serial" or (self.backend == "joblib" and self._n_jobs() == 1):
+        if self._in_process():
             return [fn(item) for item in self._bar(items, desc)]
         if self.blas_threads is not None:
             fn = LimitedBlas(fn, self.blas_threads)
@@ -156,6 +154,10 @@ class Runner:
         if self._warm_error is not None:
             err, self._warm_error = self._warm_error, None
             raise err
+
+    def _in_process(self) -> bool:
+        """Whether tasks run in this process: serially, or on a single joblib job."""
+        return self.backend == "serial" or (self.backend == "joblib" and self._n_jobs() == 1)
 
     def _n_jobs(self) -> int:
         return self.jobs or os.cpu_count() or 1
