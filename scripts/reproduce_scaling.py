@@ -22,9 +22,10 @@ them.
 
 ``--model`` measures what a loaded machine cannot: it runs every task serially in this
 process, records each one's CPU time (which the load barely changes), and schedules
-them on ``--workers`` ideal workers in the order the runner hands them out (costliest
-first, each to the first free worker, one map per stage), adding the client's own CPU
-time (imports, assembly). The figures are tasks too, as in ``fir-gym reproduce --out``.
+them on ``--workers`` ideal workers on a virtual clock, in the order ``execute`` hands
+them out (costliest waiting task first, a follow-up stage as soon as its own stage is
+done), adding the client's own CPU time (imports, assembly). The figures are tasks too,
+as in ``fir-gym reproduce --out``.
 The ratio is the speed-up an idle machine would give, before the workers' start-up.
 """
 
@@ -58,11 +59,15 @@ def clear_numba_cache() -> int:
 def run(backend: str, out: Path, quick: bool, figures: bool) -> float:
     args = [sys.executable, "-m", "fir_gym.cli", "reproduce", "--no-progress"]
     args += ["--quick"] if quick else []
-    args += ["--out", str(out)] if figures else []
+    args += ["--out", str(out.resolve())] if figures else []
     if backend != "serial":
         args += ["--backend", backend, "--jobs", str(JOBS)]
     start = time.perf_counter()
-    done = subprocess.run(args, capture_output=True, text=True, check=False)
+    # run outside any checkout: `python -m` puts the working directory first on sys.path,
+    # and a repository's top-level fir_gym/ (without envs/ and estimators/) would shadow
+    # the installed package
+    done = subprocess.run(args, capture_output=True, text=True, check=False,
+                          cwd=tempfile.gettempdir())
     wall = time.perf_counter() - start
     if done.returncode:
         raise SystemExit(f"{backend} failed:\n{done.stderr[-2000:]}")
@@ -76,7 +81,7 @@ def run(backend: str, out: Path, quick: bool, figures: bool) -> float:
 
 def model(quick: bool, workers: int) -> None:
     """Per-task CPU times, scheduled on ``workers`` ideal workers (see the module docstring)."""
-    import heapq
+    import concurrent.futures
     import importlib
 
     from fir_gym.scenarios import SCENARIOS, episodes
@@ -84,37 +89,45 @@ def model(quick: bool, workers: int) -> None:
     from fir_gym.scenarios.plan import execute
     from fir_gym.scenarios.runner import Runner
 
-    stages: list[list[float]] = []
+    class Simulated(Runner):
+        """Runs each task here when it is handed out, timing its CPU, and reports it done
+        on a virtual clock as ``workers`` idle workers would: the hand-out order is
+        execute's own, with its dependencies between stages."""
 
-    class Timing(Runner):
-        def map(self, fn, items, *, desc=None):  # type: ignore[no-untyped-def]
-            out, times = [], []
-            for item in items:
-                t = time.process_time()
-                out.append(fn(item))
-                times.append(time.process_time() - t)
-            stages.append(times)
-            return out
+        def __init__(self) -> None:
+            super().__init__("serial")
+            self.now, self.busy, self.tasks = 0.0, 0.0, 0
+            self.finish: dict[concurrent.futures.Future, float] = {}
+
+        def slots(self) -> int:
+            return workers
+
+        def submit(self, fn, item):  # type: ignore[no-untyped-def]
+            t = time.process_time()
+            future = super().submit(fn, item)
+            took = time.process_time() - t
+            self.finish[future] = self.now + took
+            self.busy, self.tasks = self.busy + took, self.tasks + 1
+            return future
+
+        def wait_any(self, futures):  # type: ignore[no-untyped-def]
+            first = min(futures, key=self.finish.__getitem__)
+            self.now = self.finish.pop(first)
+            return {first}
 
     start = time.process_time()
     modules = [importlib.import_module(f"fir_gym.scenarios.{n}") for n in SCENARIOS]
     plans = [episodes.plan(0)] + [with_figures(m.plan(seed=0, quick=quick), n)
                                   for m, n in zip(modules, SCENARIOS, strict=True)]
+    runner = Simulated()
     t0 = time.process_time()
-    execute(plans, Timing())
+    execute(plans, runner)
     t1 = time.process_time()
 
-    def makespan(times: list[float]) -> float:
-        free = [0.0] * workers
-        for t in times:
-            heapq.heappush(free, heapq.heappop(free) + t)
-        return max(free)
-
-    tasks = sum(map(sum, stages))
-    client = (t0 - start) + (t1 - t0 - tasks)
-    serial, parallel = client + tasks, client + sum(map(makespan, stages))
-    print(f"tasks {sum(map(len, stages))} in {len(stages)} stages: {tasks:.1f} s CPU; client "
-          f"(imports, assembly) {client:.1f} s")
+    client = (t0 - start) + (t1 - t0 - runner.busy)
+    serial, parallel = client + runner.busy, client + runner.now
+    print(f"tasks {runner.tasks}: {runner.busy:.1f} s CPU; client (imports, assembly) "
+          f"{client:.1f} s")
     print(f"modelled serial {serial:.1f} s, {workers} workers {parallel:.1f} s: speed-up "
           f"{serial / parallel:.2f}x (before the workers' start-up)")
 
@@ -124,10 +137,11 @@ def _quick_tasks() -> list:  # type: ignore[type-arg]
     import importlib
 
     from fir_gym.scenarios import SCENARIOS
+    from fir_gym.scenarios.plan import ready_tasks
 
     plans = [importlib.import_module(f"fir_gym.scenarios.{n}").plan(seed=0, quick=True)
              for n in SCENARIOS]
-    return [t for p in plans for t in p.tasks]
+    return [t for p in plans for t in ready_tasks(p)]
 
 
 def _run_tasks(_: int) -> float:

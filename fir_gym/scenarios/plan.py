@@ -3,19 +3,23 @@
 Each scenario's ``plan(seed, quick, runs)`` returns a :class:`Stage` — its Monte
 Carlo split into :class:`Task` s (a module-level function and one argument, each
 carrying its own seed), and ``then``, which turns the task results into the report
-or into a further stage (work that needs the results of the first, e.g. filters
-run on simulated data). :func:`execute` runs the stages of several plans
-together, so that one :meth:`Runner.map` call holds the tasks of every scenario
-and the workers stay busy across scenario boundaries; tasks are handed out
-costliest first (their ``cost`` is a rough estimate in seconds), and the results
-come back in task order. The task split never depends on the backend, and every
-task draws only from its own seed, so the reports are identical on every backend.
+or into a further plan (work that needs the results of the first, e.g. filters run
+on simulated data) — or a :class:`Group` of plans advanced side by side
+(:func:`gather`). :func:`execute` runs several plans together as one pool of work:
+a task is handed out as soon as it is known, costliest first among those waiting
+(``cost`` is a rough estimate in seconds), and a plan's follow-up stage is handed
+out as soon as its own stage is done, while the other plans' tasks are still
+running, so the workers never wait for a stage of every scenario to end. The task
+split never depends on the backend, and every task draws only from its own seed,
+so the reports are identical on every backend whatever the order of the work.
 
     reports = execute([paper000.plan(seed=0), paper001.plan(seed=0)], Runner("joblib", jobs=2))
 """
 
 from __future__ import annotations
 
+import heapq
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -46,61 +50,123 @@ class Stage:
     desc: str = field(default="")
 
 
+@dataclass
+class Group:
+    """Plans advanced independently, then ``then(values)`` of their final values (in order):
+    a value or a further plan. Made by :func:`gather`."""
+
+    plans: Sequence[Any]
+    then: Callable[[list[Any]], Any]
+    desc: str = field(default="")
+
+
+class _Node:
+    """A plan being executed: its current value, and the group waiting for it (if any)."""
+
+    def __init__(self, value: Any, parent: _Node | None = None, slot: int = 0) -> None:
+        self.value, self.parent, self.slot = value, parent, slot
+        self.results: list[Any] = []
+        self.left = 0            # tasks of the current stage, or sub-plans of the group, unfinished
+        self.children: list[_Node] = []
+
+
 def execute(plans: Sequence[Any], runner: Runner | None = None, *,
             desc: str | None = None) -> list[Any]:
-    """Run every :class:`Stage` of ``plans`` on ``runner``; the final values, in order.
+    """Run ``plans`` to their final values on ``runner``; the values, in order.
 
-    A plan that is not a :class:`Stage` is already final. The first stages of all
-    plans are mapped together, then their follow-up stages, and so on.
+    A plan that is neither a :class:`Stage` nor a :class:`Group` is already final.
+    Every task known is waiting or running; the runner keeps :meth:`Runner.slots`
+    of them handed out, and the costliest waiting task goes next.
     """
     runner = runner or SERIAL
-    pending = list(plans)
-    while True:
-        open_ = [i for i, p in enumerate(pending) if isinstance(p, Stage)]
-        if not open_:
-            return pending
-        batch = [(i, j, t) for i in open_ for j, t in enumerate(pending[i].tasks)]
-        order = sorted(range(len(batch)), key=lambda b: -batch[b][2].cost)   # stable: ties keep
-        label = desc or ", ".join(dict.fromkeys(pending[i].desc for i in open_ if pending[i].desc))
-        out = runner.map(run_task, [batch[b][2] for b in order], desc=label or None)
-        results: dict[int, list[Any]] = {i: [None] * len(pending[i].tasks) for i in open_}
-        for b, value in zip(order, out, strict=True):
-            i, j, _ = batch[b]
-            results[i][j] = value
-        for i in open_:
-            pending[i] = pending[i].then(results[i])
+    waiting: list[tuple[float, int, _Node, int]] = []          # a heap: costliest first
+    order = itertools.count()                                 # ties: first known, first out
+    bar = runner.bar(desc)
+
+    def advance(node: _Node) -> None:
+        """Open ``node``'s current stage or group; once its value is final, tell its group."""
+        while True:
+            value = node.value
+            if isinstance(value, Stage) and value.tasks:
+                node.results, node.left = [None] * len(value.tasks), len(value.tasks)
+                for j, task in enumerate(value.tasks):
+                    heapq.heappush(waiting, (-task.cost, next(order), node, j))
+                bar.add(len(value.tasks))
+                return
+            if isinstance(value, Stage):                       # no tasks: straight on
+                node.value = value.then([])
+                continue
+            if isinstance(value, Group) and value.plans:
+                node.children = [_Node(p, node, k) for k, p in enumerate(value.plans)]
+                node.left = len(node.children)
+                for child in node.children:
+                    advance(child)
+                return
+            if isinstance(value, Group):
+                node.value = value.then([])
+                continue
+            parent = node.parent
+            if parent is not None:
+                parent.left -= 1
+                if parent.left == 0:
+                    parent.value = parent.value.then([c.value for c in parent.children])
+                    parent.children = []
+                    advance(parent)
+            return
+
+    roots = [_Node(p) for p in plans]
+    running: dict[Any, tuple[_Node, int]] = {}
+    try:
+        for root in roots:
+            advance(root)
+        slots = runner.slots() if waiting else 1
+        while waiting or running:
+            while waiting and len(running) < slots:
+                _, _, node, j = heapq.heappop(waiting)
+                running[runner.submit(run_task, node.value.tasks[j])] = (node, j)
+            for future in runner.wait_any(running):
+                node, j = running.pop(future)
+                node.results[j] = future.result()
+                node.left -= 1
+                bar.update()
+                if node.left == 0:
+                    results, node.results = node.results, []
+                    node.value = node.value.then(results)
+                    advance(node)
+    finally:
+        for future in running:     # after an error: what has not started does not start
+            future.cancel()
+        bar.close()
+    return [root.value for root in roots]
 
 
-def gather(plans: Sequence[Any], then: Callable[[list[Any]], Any], desc: str = "") -> Any:
-    """One plan that advances ``plans`` side by side, stage by stage, then ``then(values)``.
-
-    A scenario with two experiments of different depths (one stage, two stages) is
-    ``gather([plan_a, plan_b], assemble)``: each stage of the result holds the next
-    tasks of every plan that still has some.
-    """
+def gather(plans: Sequence[Any], then: Callable[[list[Any]], Any], desc: str = "") -> Group:
+    """One plan of ``plans``, each advanced on its own, then ``then(values)`` of their final
+    values: a scenario with two experiments of different depths (one stage, two stages)
+    is ``gather([plan_a, plan_b], assemble)``."""
     plans = list(plans)
-    open_ = [i for i, p in enumerate(plans) if isinstance(p, Stage)]
-    if not open_:
-        return then(plans)
-    sizes = [len(plans[i].tasks) for i in open_]
+    return Group(plans, then, desc=desc or ", ".join(dict.fromkeys(
+        p.desc for p in plans if isinstance(p, Stage | Group) and p.desc)))
 
-    def advance(results: list[Any]) -> Any:
-        nxt, start = list(plans), 0
-        for i, n in zip(open_, sizes, strict=True):
-            nxt[i] = plans[i].then(results[start:start + n])
-            start += n
-        return gather(nxt, then, desc)
 
-    return Stage([t for i in open_ for t in plans[i].tasks], advance,
-                 desc=desc or ", ".join(dict.fromkeys(plans[i].desc for i in open_)))
+def ready_tasks(plan: Any) -> list[Task]:
+    """The tasks ``plan`` can hand out before any result is in (those of its first stages)."""
+    if isinstance(plan, Stage):
+        return list(plan.tasks)
+    if isinstance(plan, Group):
+        return [t for p in plan.plans for t in ready_tasks(p)]
+    return []
 
 
 def followed_by(plan: Any, task: Callable[[Any], Task]) -> Any:
     """``plan``, then one more task made from its final value by ``task(value)``: the final
-    value becomes ``(value, result)``. The task joins the next map of :func:`execute`, beside
-    the tasks of plans still running (a scenario's figures: :mod:`.figures`)."""
+    value becomes ``(value, result)``. The task is handed out as soon as that value is
+    known, beside the tasks of plans still running (a scenario's figures: :mod:`.figures`)."""
     if isinstance(plan, Stage):
         return Stage(plan.tasks, lambda results: followed_by(plan.then(results), task),
+                     desc=plan.desc)
+    if isinstance(plan, Group):
+        return Group(plan.plans, lambda values: followed_by(plan.then(values), task),
                      desc=plan.desc)
     return Stage([task(plan)], lambda out: (plan, out[0]))
 

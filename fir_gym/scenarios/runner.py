@@ -8,15 +8,21 @@ so the same seeds give bit-identical numbers serially, with joblib and on Dask.
 
     runner = Runner("joblib", jobs=2)
     results = runner.map(simulate_one, [(seed, settings) for seed in seeds])
+
+:meth:`Runner.submit` and :meth:`Runner.wait_any` hand out one task at a time, as
+:class:`concurrent.futures.Future`-like objects, for a caller that decides what to
+run next from what has finished (:func:`.plan.execute`); :meth:`Runner.slots` says
+how many to keep handed out.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import importlib
 import os
 import threading
 import warnings
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Sequence
 from typing import Any
 
 from fir_gym.estimators._validation import one_of
@@ -33,8 +39,8 @@ class Runner:
     """Map a picklable function over task arguments with one of :data:`BACKENDS`.
 
     Args:
-        backend: ``"serial"`` (this process), ``"joblib"`` (local processes, the
-            ``loky`` backend) or ``"dask"`` (a ``distributed`` cluster).
+        backend: ``"serial"`` (this process), ``"joblib"`` (local processes: joblib's
+            ``loky`` process pool) or ``"dask"`` (a ``distributed`` cluster).
         jobs: worker processes for joblib (default: the number of CPUs); for a
             Dask *local* cluster, its number of workers.
         scheduler: address of a running Dask scheduler (``tcp://host:8786``); with
@@ -76,7 +82,7 @@ class Runner:
         if self._in_process() or self._warming is not None:
             return
         if self.backend == "joblib":
-            import joblib  # noqa: F401  (imported here, not in the thread)
+            self._loky_executor()          # created here, not in the thread
 
         def warm() -> None:
             try:
@@ -100,18 +106,58 @@ class Runner:
             return []
         return self._map_now(fn, items, desc)
 
+    def submit(self, fn: Callable[[Any], Any], item: Any) -> Any:
+        """Hand out ``fn(item)``; a future whose ``result()`` is its value (or raises its
+        error). In this process the task runs before ``submit`` returns."""
+        self._wait_for_start()
+        if self._in_process():
+            future: concurrent.futures.Future[Any] = concurrent.futures.Future()
+            try:
+                future.set_result(fn(item))
+            except Exception as err:      # raised by result(), as from a worker
+                future.set_exception(err)
+            return future
+        fn = self._limited(fn)
+        if self.backend == "joblib":
+            return self._loky_executor().submit(fn, item)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Sending large graph")
+            return self._dask_client().submit(fn, item, pure=False)
+
+    def wait_any(self, futures: Collection[Any]) -> set[Any]:
+        """Block until at least one of ``futures`` (from :meth:`submit`) is done; the done ones."""
+        if self.backend == "dask":
+            from distributed import wait
+
+            return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
+        done, _ = concurrent.futures.wait(futures, return_when=concurrent.futures.FIRST_COMPLETED)
+        return done
+
+    def slots(self) -> int:
+        """How many tasks to keep handed out at once: one in this process; elsewhere one per
+        worker and one more, waiting, so that a worker that finishes finds its next task."""
+        self._wait_for_start()
+        if self._in_process():
+            return 1
+        if self.backend == "joblib":
+            return self._n_jobs() + 1
+        return sum(self._dask_client().nthreads().values()) + 1
+
+    def bar(self, desc: str | None = None) -> Any:
+        """A progress bar whose total grows as tasks are handed out (``add(n)``, ``update()``,
+        ``close()``); silent without ``progress`` or tqdm."""
+        bar = self._bar([], desc, total=0)
+        return _Progress(bar if hasattr(bar, "update") else None)
+
     def _map_now(self, fn: Callable[[Any], Any], items: list[Any], desc: str | None
                  ) -> list[Any]:
         if self._in_process():
             return [fn(item) for item in self._bar(items, desc)]
-        if self.blas_threads is not None:
-            fn = LimitedBlas(fn, self.blas_threads)
+        fn = self._limited(fn)
         if self.backend == "joblib":
-            from joblib import Parallel, delayed
-
-            parallel = Parallel(n_jobs=self._n_jobs(), backend="loky", return_as="generator")
-            out = parallel(delayed(fn)(item) for item in items)
-            return list(self._bar(out, desc, total=len(items)))
+            executor = self._loky_executor()
+            pending = [executor.submit(fn, item) for item in items]
+            return [f.result() for f in self._bar(pending, desc, total=len(items))]
         client = self._dask_client()
         with warnings.catch_warnings():
             # each task's argument is its own data, sent once: dask's advice to scatter
@@ -162,6 +208,16 @@ class Runner:
     def _n_jobs(self) -> int:
         return self.jobs or os.cpu_count() or 1
 
+    def _limited(self, fn: Callable[[Any], Any]) -> Callable[[Any], Any]:
+        return fn if self.blas_threads is None else LimitedBlas(fn, self.blas_threads)
+
+    def _loky_executor(self) -> Any:
+        """joblib's process pool (loky's reusable executor: its workers outlive a map, and
+        one pool serves every runner of this process with the same number of jobs)."""
+        from joblib.externals.loky import get_reusable_executor
+
+        return get_reusable_executor(max_workers=self._n_jobs())
+
     def _dask_client(self) -> Any:
         if self._client is None:
             from distributed import Client, LocalCluster
@@ -189,6 +245,26 @@ class Runner:
         except ImportError:  # tqdm is a dependency; a stripped install just shows no bars
             return iterable
         return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+class _Progress:
+    """A tqdm bar whose total grows (or nothing, for ``None``)."""
+
+    def __init__(self, bar: Any) -> None:
+        self._bar = bar
+
+    def add(self, n: int) -> None:
+        if self._bar is not None and n:
+            self._bar.total += n
+            self._bar.refresh()
+
+    def update(self, n: int = 1) -> None:
+        if self._bar is not None:
+            self._bar.update(n)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
 
 
 class LimitedBlas:

@@ -4,7 +4,15 @@ local Dask cluster; stages of several plans mapped together, results back in tas
 import numpy as np
 import pytest
 
-from fir_gym.scenarios.plan import Stage, Task, execute, followed_by, gather, run_plan
+from fir_gym.scenarios.plan import (
+    Stage,
+    Task,
+    execute,
+    followed_by,
+    gather,
+    ready_tasks,
+    run_plan,
+)
 from fir_gym.scenarios.runner import Runner, blas_threads
 from fir_gym.scenarios.runner import seeded_normals as noisy_task
 
@@ -54,16 +62,38 @@ def test_bad_arguments():
 
 
 class Recording(Runner):
-    """A serial runner that records the tasks of every map call."""
+    """A serial runner that records the arguments of the tasks in the order handed out."""
 
     def __init__(self):
         super().__init__("serial")
-        self.calls = []
+        self.handed = []
 
-    def map(self, fn, items, *, desc=None):
-        items = list(items)
-        self.calls.append(items)
-        return super().map(fn, items, desc=desc)
+    def submit(self, fn, item):
+        self.handed.append(item.arg)
+        return super().submit(fn, item)
+
+
+class VirtualWorkers(Recording):
+    """``workers`` idle workers on a virtual clock: a task takes its ``cost`` in seconds.
+    Records (arg, start) as handed out."""
+
+    def __init__(self, workers):
+        super().__init__()
+        self.workers, self.now, self.finish = workers, 0.0, {}
+
+    def slots(self):
+        return self.workers
+
+    def submit(self, fn, item):
+        future = super().submit(fn, item)
+        self.handed[-1] = (item.arg, self.now)
+        self.finish[future] = self.now + item.cost
+        return future
+
+    def wait_any(self, futures):
+        first = min(futures, key=self.finish.__getitem__)
+        self.now = self.finish.pop(first)
+        return {first}
 
 
 def _two_stage(seed):
@@ -76,24 +106,75 @@ def _two_stage(seed):
     return Stage(first, second)
 
 
-def test_execute_maps_the_stages_of_all_plans_together_costliest_first():
+def test_execute_hands_out_costliest_first_and_a_follow_up_as_soon_as_its_stage_is_done():
+    """Serially (one slot): the first stages by cost; plan a's second stage (cost 1) goes
+    out as soon as a's last first-stage task is in, before b's cost-0 task still waiting."""
     runner = Recording()
     a, b, c = execute([_two_stage(0), _two_stage(100), "already final"], runner)
     assert c == "already final" and a[0] == b[0] == "done"
-    assert len(runner.calls) == 2                             # one map per stage, not per plan
-    assert [t.cost for t in runner.calls[0]] == [2.0, 2.0, 1.0, 1.0, 0.0, 0.0]
-    # the results are those of each plan on its own, whatever the order of the map
+    seeds = [arg[0] for arg in runner.handed]
+    assert seeds == [2, 102, 1, 101, 0, 10, 100, 110]
+    # the results are those of each plan on its own, whatever the order of the work
     np.testing.assert_array_equal(a[1], run_plan(_two_stage(0))[1])
     np.testing.assert_array_equal(b[1], run_plan(_two_stage(100))[1])
 
 
-def test_gather_advances_plans_of_different_depths_side_by_side():
+def test_a_follow_up_stage_runs_beside_another_plans_long_task():
+    """Two workers: plan ``slow`` is one 10 s task; the two-stage plan's second stage starts
+    at 2 s (its first stage: 0 + 1 + 2 s on the other worker), not after the 10 s task, as
+    one map per stage would have it; the run ends at 10 s."""
+    slow = Stage([Task(noisy_task, (50, 1.0), cost=10.0)], lambda out: out[0])
+    runner = VirtualWorkers(2)
+    done_slow, done_fast = execute([slow, _two_stage(0)], runner)
+    started = {arg[0]: at for arg, at in runner.handed}
+    assert started == {50: 0.0, 2: 0.0, 1: 2.0, 0: 3.0, 10: 3.0}
+    assert runner.now == 10.0
+    np.testing.assert_array_equal(done_slow, noisy_task((50, 1.0)))
+    assert done_fast[0] == "done"
+
+
+def test_gather_advances_plans_of_different_depths_each_on_its_own():
     one = Stage([Task(noisy_task, (1, 1.0))], lambda out: out[0])
     runner = Recording()
-    value = run_plan(gather([_two_stage(5), one], lambda values: values), runner)
-    assert len(runner.calls) == 2 and len(runner.calls[0]) == 4 and len(runner.calls[1]) == 1
+    value = run_plan(gather([_two_stage(5), one, "final"], lambda values: values), runner)
     np.testing.assert_array_equal(value[1], noisy_task((1, 1.0)))
-    assert value[0][0] == "done"
+    assert value[0][0] == "done" and value[2] == "final"
+    assert len(runner.handed) == 5
+    # nested groups, empty stages and empty groups reach their values too
+    nested = gather([gather([one, Stage([], lambda out: "empty")], tuple), gather([], len)],
+                    lambda values: values)
+    inner, zero = run_plan(nested)
+    np.testing.assert_array_equal(inner[0], noisy_task((1, 1.0)))
+    assert inner[1] == "empty" and zero == 0
+    assert [t.arg for t in ready_tasks(nested)] == [(1, 1.0)]
+
+
+def test_an_error_in_a_task_or_an_assembly_reaches_the_caller():
+    broken = Stage([Task(noisy_task, ("not a seed", 1.0))], lambda out: out)
+    with pytest.raises(TypeError):
+        execute([_two_stage(0), broken])
+    with pytest.raises(ZeroDivisionError):
+        run_plan(Stage([Task(noisy_task, (1, 1.0))], lambda out: 1 / 0))
+    with Runner("joblib", jobs=2) as runner:
+        with pytest.raises(TypeError):
+            execute([_two_stage(0), broken], runner)
+        assert execute([_two_stage(0)], runner)[0][0] == "done"        # still usable
+
+
+@pytest.mark.parametrize("backend", ["serial", "joblib", "dask"])
+def test_submit_wait_any_and_slots(backend):
+    if backend == "dask":
+        pytest.importorskip("distributed")
+    serial = Runner("serial").map(noisy_task, TASKS)
+    with Runner(backend, jobs=2) as runner:
+        assert runner.slots() == (1 if backend == "serial" else 3)
+        futures = {runner.submit(noisy_task, task): k for k, task in enumerate(TASKS)}
+        got = {}
+        while futures:
+            for future in runner.wait_any(list(futures)):
+                got[futures.pop(future)] = future.result()
+    for k, ref in enumerate(serial):
+        np.testing.assert_array_equal(got[k], ref)
 
 
 def test_plans_give_the_serial_numbers_on_joblib_and_dask():
@@ -107,18 +188,22 @@ def test_plans_give_the_serial_numbers_on_joblib_and_dask():
 
 
 def test_followed_by_runs_one_more_task_beside_the_plans_still_running():
-    """A one-stage plan's extra task joins the second map, with the two-stage plan's second
-    stage; the final value is the plan's value and the task's result."""
-    one = Stage([Task(noisy_task, (1, 1.0))], lambda out: out[0])
+    """A one-stage plan's extra task is handed out as soon as that plan is final, before
+    the two-stage plan's cheaper first-stage tasks; the final value is the plan's value and
+    the task's result. A group can be followed too."""
+    one = Stage([Task(noisy_task, (1, 1.0), cost=5.0)], lambda out: out[0])
     runner = Recording()
-    extra, deep = execute([followed_by(one, lambda v: Task(noisy_task, (2, float(v.sum())))),
+    extra, deep = execute([followed_by(one, lambda v: Task(noisy_task, (2, float(v.sum())),
+                                                           cost=3.0)),
                            _two_stage(5)], runner)
-    assert [len(c) for c in runner.calls] == [4, 2]
+    assert [arg[0] for arg in runner.handed] == [1, 2, 7, 6, 5, 15]
     np.testing.assert_array_equal(extra[0], noisy_task((1, 1.0)))
     np.testing.assert_array_equal(extra[1], noisy_task((2, float(noisy_task((1, 1.0)).sum()))))
     assert deep[0] == "done"
     value, result = run_plan(followed_by("final", lambda v: Task(len, v)))
     assert (value, result) == ("final", 5)
+    grouped = followed_by(gather([one, "x"], lambda values: values[1]), lambda v: Task(len, v))
+    assert run_plan(grouped) == ("x", 1)
 
 
 @pytest.mark.parametrize("backend", ["joblib", "dask"])
