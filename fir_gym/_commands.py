@@ -64,7 +64,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         plans = [m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
         if out:      # each scenario's figures: a task of the runner once its report is final
             plans = [with_figures(p, name) for p, name in zip(plans, wanted, strict=True)]
-        # every scenario's tasks in one map per stage: the workers stay busy across scenarios
+        # every scenario's tasks in one pool of work: a follow-up stage goes out as soon as
+        # its own stage is done, so the workers stay busy across stages and scenarios
         summaries, *done = execute([episodes.plan(seed=args.seed), *plans], runner,
                                    desc="reproduce")
     reports = [save_figures(d, out) for d in done] if out else done
