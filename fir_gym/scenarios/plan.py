@@ -79,6 +79,7 @@ def execute(plans: Sequence[Any], runner: Runner | None = None, *,
     of them handed out, and the costliest waiting task goes next.
     """
     runner = runner or SERIAL
+    slots = runner.slots()        # first: a runner that cannot start fails before any work
     waiting: list[tuple[float, int, _Node, int]] = []          # a heap: costliest first
     order = itertools.count()                                 # ties: first known, first out
     bar = runner.bar(desc)
@@ -119,7 +120,6 @@ def execute(plans: Sequence[Any], runner: Runner | None = None, *,
     try:
         for root in roots:
             advance(root)
-        slots = runner.slots() if waiting else 1
         while waiting or running:
             while waiting and len(running) < slots:
                 _, _, node, j = heapq.heappop(waiting)

@@ -254,9 +254,8 @@ class _Progress:
         self._bar = bar
 
     def add(self, n: int) -> None:
-        if self._bar is not None and n:
-            self._bar.total += n
-            self._bar.refresh()
+        if self._bar is not None:
+            self._bar.total += n          # shown at the next update
 
     def update(self, n: int = 1) -> None:
         if self._bar is not None:
