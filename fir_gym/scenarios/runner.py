@@ -157,7 +157,12 @@ class Runner:
         if self.backend == "joblib":
             executor = self._loky_executor()
             pending = [executor.submit(fn, item) for item in items]
-            return [f.result() for f in self._bar(pending, desc, total=len(items))]
+            try:
+                return [f.result() for f in self._bar(pending, desc, total=len(items))]
+            except BaseException:
+                for future in pending:   # a task failed: those not started do not start
+                    future.cancel()
+                raise
         client = self._dask_client()
         with warnings.catch_warnings():
             # each task's argument is its own data, sent once: dask's advice to scatter

@@ -224,3 +224,10 @@ def test_start_warms_the_workers_and_the_first_map_waits_for_it(backend):
             runner.map(noisy_task, TASKS)
         assert len(runner.map(noisy_task, TASKS)) == len(TASKS)     # reported once
     Runner("serial").start(["fir_gym.no_such_module"])             # serially: nothing to do
+
+
+def test_a_failing_task_fails_the_map_and_the_runner_stays_usable():
+    with Runner("joblib", jobs=2) as runner:
+        with pytest.raises(TypeError):
+            runner.map(noisy_task, [*TASKS, ("not a seed", 1.0)])
+        assert len(runner.map(noisy_task, TASKS)) == len(TASKS)
