@@ -60,11 +60,17 @@ class Group:
     desc: str = field(default="")
 
 
+def _label(plans: Sequence[Any]) -> str:
+    """The descriptions of ``plans``, each once, in order (a progress bar's label)."""
+    return ", ".join(dict.fromkeys(p.desc for p in plans if isinstance(p, Stage | Group)
+                                   and p.desc))
+
+
 class _Node:
     """A plan being executed: its current value, and the group waiting for it (if any)."""
 
-    def __init__(self, value: Any, parent: _Node | None = None, slot: int = 0) -> None:
-        self.value, self.parent, self.slot = value, parent, slot
+    def __init__(self, value: Any, parent: _Node | None = None) -> None:
+        self.value, self.parent = value, parent
         self.results: list[Any] = []
         self.left = 0            # tasks of the current stage, or sub-plans of the group, unfinished
         self.children: list[_Node] = []
@@ -82,7 +88,7 @@ def execute(plans: Sequence[Any], runner: Runner | None = None, *,
     slots = runner.slots()        # first: a runner that cannot start fails before any work
     waiting: list[tuple[float, int, _Node, int]] = []          # a heap: costliest first
     order = itertools.count()                                 # ties: first known, first out
-    bar = runner.bar(desc)
+    bar = runner.bar(desc or _label(plans) or None)
 
     def advance(node: _Node) -> None:
         """Open ``node``'s current stage or group; once its value is final, tell its group."""
@@ -98,7 +104,7 @@ def execute(plans: Sequence[Any], runner: Runner | None = None, *,
                 node.value = value.then([])
                 continue
             if isinstance(value, Group) and value.plans:
-                node.children = [_Node(p, node, k) for k, p in enumerate(value.plans)]
+                node.children = [_Node(p, node) for p in value.plans]
                 node.left = len(node.children)
                 for child in node.children:
                     advance(child)
@@ -145,8 +151,7 @@ def gather(plans: Sequence[Any], then: Callable[[list[Any]], Any], desc: str = "
     values: a scenario with two experiments of different depths (one stage, two stages)
     is ``gather([plan_a, plan_b], assemble)``."""
     plans = list(plans)
-    return Group(plans, then, desc=desc or ", ".join(dict.fromkeys(
-        p.desc for p in plans if isinstance(p, Stage | Group) and p.desc)))
+    return Group(plans, then, desc=desc or _label(plans))
 
 
 def ready_tasks(plan: Any) -> list[Task]:
