@@ -25,6 +25,15 @@ class does what must be identical everywhere:
   because the measurement noise is Gaussian, so Gymnasium's checker warns that
   they are "probably too low/high" — the warning is expected.
   ``info["state"]`` is a fresh copy of the true state ``x[k]``.
+* **Robustness conditions** (:mod:`fir_gym.envs._conditions`, docs/robustness.md):
+  ``randomize={"name": spread}`` draws the named parameters' *true* values around the
+  nominal ones at every ``reset`` (from a generator of the plant's own, seeded with the
+  reset's seed, so the noise of ``np_random`` is the same with and without it), and
+  ``burst=((k_first, k_last, δ), ...)`` stretches the state's increment by ``1 + δ`` over
+  those transitions. ``info["true_params"]`` and ``info["burst"]`` report them (only when
+  set). A plant names what it can randomize in :attr:`PlantEnv.randomizable` and rebuilds
+  its true dynamics in :meth:`PlantEnv._apply_params` (values: floats, or one per system
+  of a native vector env).
 * **Reset options.** ``reset(options={"state": x0})`` starts from a given state.
 * **Frames.** ``render()`` (``render_mode="rgb_array"``) draws the true state and
   remembers the frame's view, so that :meth:`~fir_gym.envs._overlay.EstimateDrawing.draw_estimate`
@@ -79,6 +88,14 @@ from numpy.typing import ArrayLike, NDArray
 from fir_gym.estimators import StateSpaceModel
 from fir_gym.estimators._validation import as_covariance, as_vector, positive
 
+from ._conditions import (
+    burst_delta,
+    check_burst,
+    check_randomize,
+    condition_generator,
+    draw_params,
+    stretch,
+)
 from ._inputs import real_array, reset_options
 from ._overlay import EstimateDrawing
 
@@ -124,6 +141,9 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
     cost_cap: float = math.inf
     #: beyond this magnitude a state component means the simulation failed
     state_limit: ClassVar[float] = STATE_LIMIT
+    #: the parameters ``randomize`` may name (the ``mismatch`` condition draws all of them);
+    #: each must be one :meth:`_apply_params` rebuilds the true dynamics from
+    randomizable: ClassVar[tuple[str, ...]] = ()
 
     def __init__(
         self,
@@ -136,6 +156,8 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         measurement_cov: ArrayLike,
         render_mode: str | None,
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -158,6 +180,14 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
                                  f"known parameters are {sorted(self.params)}")
             overrides.update(nominal)
         self.nominal_params: dict[str, Any] = {**self.params, **overrides}
+        #: relative spread of each randomized parameter (empty: none)
+        self.randomize: dict[str, float] = check_randomize(randomize, self.randomizable,
+                                                           type(self).__name__)
+        #: the burst windows ``(k_first, k_last, δ)`` (empty: none)
+        self.burst = check_burst(burst)
+        #: this episode's true parameters (:attr:`params` with the randomized ones drawn)
+        self.true_params: dict[str, Any] = dict(self.params)
+        self._condition_rng: np.random.Generator | None = None
         n_x = len(self.state_names)
         self.initial_state = as_vector("initial_state", initial_state, n_x)
         self.initial_state_cov = (np.zeros((n_x, n_x)) if initial_state_cov is None
@@ -221,6 +251,22 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
     def _build_model(self, params: Mapping[str, Any]) -> StateSpaceModel:
         raise NotImplementedError
 
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        """Rebuild the true dynamics from ``params`` (every parameter of :attr:`params`; the
+        :attr:`randomizable` ones floats, or ``(B,)`` arrays — one value per system — in a
+        native vector env). Called after a ``randomize`` draw; a plant with randomizable
+        parameters implements it."""
+        if self.randomizable:
+            raise NotImplementedError(f"{type(self).__name__} lists randomizable parameters "
+                                      "but does not implement _apply_params")
+
+    def _perturb(self, x: FloatArray, x_next: FloatArray, extra: dict[str, Any], delta: Any
+                 ) -> tuple[FloatArray, dict[str, Any]]:
+        """The burst (:mod:`._conditions`): the step's increment stretched by ``1 + δ``
+        (``δ`` a float, or one per row of a batch, 0 for rows outside the window). A plant
+        whose measurement or simulator depends on the path overrides it."""
+        return stretch(x, x_next, delta), extra
+
     def _draw(self, canvas: Any) -> None:
         raise NotImplementedError
 
@@ -251,11 +297,17 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         state = self._check_state("options['state']", given["state"]) \
             if "state" in given else None
         super().reset(seed=seed)
+        if self.randomize:
+            if seed is not None or self._condition_rng is None:
+                self._condition_rng = condition_generator(seed)
+            self.true_params = {**self.params, **draw_params(
+                self._condition_rng, self.nominal_params, self.randomize)}
+            self._apply_params(self.true_params)
         self.state = self._sample_initial_state(self.np_random) if state is None else state
         self.time_step = 0
         self._last_extra = {}
         self._last_obs = self._measure(self.state, None, self.np_random)
-        return self._last_obs.copy(), {"state": self.state.copy()}
+        return self._last_obs.copy(), self._condition_info({"state": self.state.copy()}, 0.0)
 
     def step(
         self, action: ArrayLike
@@ -263,6 +315,11 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         a, clipped = self._check_action(action)
         x = self.state
         x_next, extra = self._transition(x, a, self.time_step, self.np_random)
+        delta = 0.0
+        if self.burst:
+            delta = burst_delta(self.burst, self.time_step)
+            if delta:
+                x_next, extra = self._perturb(x, x_next, extra, delta)
         self.time_step += 1
         failure = extra.get("simulation_failure") or state_failure(x_next, self.state_limit)
         if failure is None:
@@ -275,17 +332,19 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
                 failure = ("nonfinite_reward" if not math.isfinite(reward) else
                            None if np.isfinite(obs).all() else "nonfinite_observation")
         if failure is not None:
-            return self._failed_step(x, a, clipped, extra, failure)
+            return self._failed_step(x, a, clipped, extra, failure, delta)
         self.state = x_next
         self._last_extra = extra
         self._last_obs = obs
         # ``a`` is a fresh array made by _check_action: no copy needed for info
         info: dict[str, Any] = {"state": x_next.copy(), "action": a,
                                 "action_clipped": clipped, **extra}
+        if self.randomize or self.burst:
+            info = self._condition_info(info, delta)
         return obs, reward, terminated, False, info
 
     def _failed_step(self, x: FloatArray, a: FloatArray, clipped: bool,
-                     extra: dict[str, Any], failure: str
+                     extra: dict[str, Any], failure: str, delta: float = 0.0
                      ) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
         """End the episode at the last valid state ``x``: the transition failed.
 
@@ -297,7 +356,16 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         info: dict[str, Any] = {"state": x.copy(), "action": a, "action_clipped": clipped}
         info.update((key, value) for key, value in extra.items() if _all_finite(value))
         info["simulation_failure"] = failure
-        return self._last_obs.copy(), reward, True, False, info
+        return self._last_obs.copy(), reward, True, False, self._condition_info(info, delta)
+
+    def _condition_info(self, info: dict[str, Any], delta: float) -> dict[str, Any]:
+        """``info`` with the conditions' entries: ``true_params`` (the randomized parameters'
+        values this episode) and ``burst`` (this step's ``δ``), each only when set."""
+        if self.randomize:
+            info["true_params"] = {name: self.true_params[name] for name in self.randomize}
+        if self.burst:
+            info["burst"] = delta
+        return info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

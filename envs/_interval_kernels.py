@@ -19,13 +19,15 @@ import numpy as np
 from fir_gym.estimators.compiled import jit
 
 
-def _start_loops(u: np.ndarray, n_b: int, scale: float, jacobian: bool
+def _start_loops(u: np.ndarray, n_b: int, scale: np.ndarray, jacobian: bool
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """The scaled first input column per system (``u`` is ``(B, n_u)`` or one row for all)
-    and the identity Jacobians the substeps multiply (empty without ``jacobian``)."""
+    """The scaled first input column per system (``u`` is ``(B, n_u)`` or one row for all;
+    ``scale`` ``(B,)`` or one for all) and the identity Jacobians the substeps multiply
+    (empty without ``jacobian``)."""
     force = np.empty(n_b)
     for b in range(n_b):
-        force[b] = u[b if u.shape[0] == n_b else 0, 0] * scale
+        force[b] = u[b if u.shape[0] == n_b else 0, 0] * scale[b if scale.shape[0] == n_b
+                                                               else 0]
     J = np.zeros((n_b, 2, 2) if jacobian else (0, 2, 2))
     for b in range(J.shape[0]):
         J[b, 0, 0] = 1.0
@@ -37,8 +39,8 @@ _start = jit(_start_loops)
 
 
 def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
-                   substeps: int, eps: float, tau: float, u_max: float, jacobian: bool
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   substeps: int, epsilon: np.ndarray, tau: float, u_max: np.ndarray,
+                   jacobian: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n_b = x.shape[0]
     force, Phi = _start(u, n_b, u_max, jacobian)
     half = 0.5 * tau
@@ -47,6 +49,7 @@ def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
     x1_sum = 0.5 * x1
     for s in range(substeps):
         for b in range(n_b):
+            eps = epsilon[b if epsilon.shape[0] == n_b else 0]
             dw = dW[s, b] if noisy else 0.0
             u1, u2, fb = x1[b], x2[b], force[b]
             a1 = -u1 + eps * (1.0 - u1 * u1) * u2 + fb
@@ -77,20 +80,21 @@ def _heun_interval(x: np.ndarray, u: np.ndarray, dW: np.ndarray, noisy: bool,
     return x_end, (x1_sum - 0.5 * x1) / substeps, Phi
 
 
-#: ``heun_interval(x (B, 2), u (B or 1, n_u), dW (substeps, B), noisy, substeps, ε, τ, u_max,
-#: jacobian)
+#: ``heun_interval(x (B, 2), u (B or 1, n_u), dW (substeps, B), noisy, substeps, ε (B or 1,),
+#: τ, u_max (B or 1,), jacobian)
 #: -> (x_end (B, 2), mean of x1 (B,), Φ (B, 2, 2) or empty)``
 heun_interval = jit(_heun_interval)
 
 
-def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu: float, d: float,
-                    thrust_max: float, jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
+def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu_: np.ndarray, d: float,
+                    thrust_max: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
     n_b = x.shape[0]
     r = x[:, 0].copy()
     v = x[:, 1].copy()
     a, J = _start(u, n_b, thrust_max, jacobian)
     for _ in range(substeps):
         for b in range(n_b):
+            mu = mu_[b if mu_.shape[0] == n_b else 0]
             rb, vb = r[b], v[b]
             if jacobian:
                 g = 2.0 * mu / (rb * rb * rb) * d
@@ -107,7 +111,8 @@ def _orbit_interval(x: np.ndarray, u: np.ndarray, substeps: int, mu: float, d: f
     return x_next, J
 
 
-#: ``orbit_interval(x (B, 2), u (B or 1, n_u), substeps, μ, Δ, thrust_max, jacobian)
+#: ``orbit_interval(x (B, 2), u (B or 1, n_u), substeps, μ (B or 1,), Δ, thrust_max (B or 1,),
+#: jacobian)
 #: -> (x_next (B, 2), J (B, 2, 2) or empty)``
 orbit_interval = jit(_orbit_interval)
 

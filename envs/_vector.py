@@ -42,6 +42,14 @@ with its last observation and the terminal penalty, and
 ``info["simulation_failure"]`` (an object array, ``None`` elsewhere, with its
 ``_simulation_failure`` mask) says why; non-finite per-step extras of that sub-env
 are masked out (0, with their ``_key`` mask off).
+
+The plant's robustness conditions (:mod:`fir_gym.envs._conditions`) hold per
+sub-environment: with ``randomize`` every sub-env draws its own true parameters when it
+(re)starts an episode (the plant's :meth:`~fir_gym.envs._base.PlantEnv._apply_params`
+then gets one value per sub-env), and ``burst`` follows each sub-env's own step count;
+``info["true_params"]`` (a dict of ``(B,)`` arrays) and ``info["burst"]`` report them.
+Their draws come from a condition generator of the vector env's own (one per sub-env
+with ``generators="per_env"``, seeded as a single env seeded ``seed + i`` seeds its own).
 """
 
 from __future__ import annotations
@@ -59,6 +67,7 @@ from numpy.typing import ArrayLike, NDArray
 from fir_gym.estimators._validation import one_of
 
 from ._base import RESET_OPTIONS, PlantEnv, state_failure, valid_states
+from ._conditions import burst_delta, condition_generator, draw_params
 from ._inputs import real_array, reset_options
 
 FloatArray = NDArray[np.float64]
@@ -105,6 +114,8 @@ class PlantVectorEnv(VectorEnv):
         self.autoreset_mode = mode
         self.generators = generators
         self._generators: list[np.random.Generator] | None = None
+        #: the condition draws' generator(s): one, or one per sub-env (``per_env``)
+        self._condition_rngs: list[np.random.Generator] | None = None
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
@@ -141,13 +152,21 @@ class PlantVectorEnv(VectorEnv):
                                  "per sub-env); give one int seed")
             super().reset(seed=seed)
         everyone = self._everyone
+        if self.plant.randomize:
+            self._seed_conditions(seed)
+            self.plant.true_params = {**self.plant.params, **draw_params(
+                self._condition_rng(everyone), self.plant.nominal_params, self.plant.randomize,
+                self.num_envs)}
+            self.plant._apply_params(self.plant.true_params)
         self.states = self.plant._sample_initial_state(self._rng(everyone), self.num_envs) \
             if states is None else states
         self.steps[:] = 0
         self.prev_done[:] = False
         obs = self.plant._measure(self.states, None, self._rng(everyone))
         self._last_obs = obs.copy()
-        return obs, self._info({"state": self.states.copy()})
+        info: dict[str, Any] = {"state": self.states.copy()}
+        self._condition_info(info, np.zeros(self.num_envs) if self.plant.burst else None)
+        return obs, self._info(info)
 
     def step(self, actions: ArrayLike
              ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -157,6 +176,11 @@ class PlantVectorEnv(VectorEnv):
         any_done = bool(done.any())
         live = ~done if any_done else self._everyone
         x_next, extra = plant._transition(x, A, self.steps, self._rng(live))
+        delta: Any = None
+        if plant.burst:
+            delta = burst_delta(plant.burst, self.steps)
+            if delta.any():
+                x_next, extra = plant._perturb(x, x_next, extra, delta)
         limit = plant.state_limit
         # one reduction each way in the common case (NaN fails the comparisons)
         all_valid = bool(x_next.max() <= limit and x_next.min() >= -limit)
@@ -199,6 +223,7 @@ class PlantVectorEnv(VectorEnv):
         info = {"state": x_next.copy(), "action": A, "action_clipped": clipped}
         for key, v in extra.items():
             info[key] = np.broadcast_to(np.asarray(v), (self.num_envs,)).copy()
+        self._condition_info(info, delta)
         if failure is not None:
             info["simulation_failure"] = failure
             masks["simulation_failure"] = failure != None     # noqa: E711
@@ -211,6 +236,8 @@ class PlantVectorEnv(VectorEnv):
                               for key, value in info.items()}
                 self._restart(ended, x_next, obs)
                 info["state"] = x_next.copy()        # the reset info of the restarted ones
+                self._condition_info(info, None if delta is None else
+                                     np.where(ended, 0.0, delta))
                 info["final_obs"], info["_final_obs"] = final_obs, ended
                 info["final_info"], info["_final_info"] = final_info, ended
             self.prev_done = np.zeros(self.num_envs, dtype=bool)
@@ -221,7 +248,17 @@ class PlantVectorEnv(VectorEnv):
         return obs, reward, terminated, truncated, info
 
     def _restart(self, rows: np.ndarray, x_next: FloatArray, obs: FloatArray) -> None:
-        """Start a new episode in ``rows``: a fresh initial state and its measurement."""
+        """Start a new episode in ``rows``: fresh true parameters (with ``randomize``), a fresh
+        initial state and its measurement."""
+        plant = self.plant
+        if plant.randomize:
+            drawn = draw_params(self._condition_rng(rows), plant.nominal_params,
+                                plant.randomize, int(rows.sum()))
+            for name, values in drawn.items():
+                column = np.array(plant.true_params[name], dtype=np.float64)
+                column[rows] = values
+                plant.true_params[name] = column
+            plant._apply_params(plant.true_params)
         rng = self._rng(rows)
         fresh = self.plant._sample_initial_state(rng, int(rows.sum()))
         x_next[rows] = fresh
@@ -245,6 +282,45 @@ class PlantVectorEnv(VectorEnv):
         else:
             self._generators = [g if s is None else np_random(s)[0]
                                 for g, s in zip(self._generators, seeds, strict=True)]
+
+    def _seed_conditions(self, seed: int | list[int | None] | None) -> None:
+        """(Re)seed the condition generator(s) as :meth:`reset` seeds the plant's: sub-env ``i``
+        of a ``per_env`` vector env reset with seed ``s`` draws the parameters a single env
+        reset with seed ``s + i`` draws."""
+        n = self.num_envs
+        if self.generators != "per_env":
+            if seed is not None or self._condition_rngs is None:
+                one = None if seed is None or isinstance(seed, (list, tuple)) else int(seed)
+                self._condition_rngs = [condition_generator(one)]
+            return
+        seeds: list[int | None]
+        if isinstance(seed, (list, tuple)):
+            seeds = list(seed)
+        else:
+            seeds = [None if seed is None else int(seed) + i for i in range(n)]
+        old = self._condition_rngs
+        self._condition_rngs = [condition_generator(s) if s is not None or old is None
+                                else old[i] for i, s in enumerate(seeds)]
+
+    def _condition_rng(self, rows: np.ndarray) -> Any:
+        """The condition generator for the systems ``rows`` (see :meth:`_rng`)."""
+        rngs = self._condition_rngs
+        if rngs is None:                                   # not yet seeded: fresh entropy
+            self._seed_conditions(None)
+            rngs = self._condition_rngs
+        assert rngs is not None
+        return rngs[0] if self.generators != "per_env" else RowGenerators(rngs, rows)
+
+    def _condition_info(self, info: dict[str, Any], delta: Any) -> None:
+        """Add ``true_params`` (copies: a restart changes them) and ``burst`` where set."""
+        plant = self.plant
+        if plant.randomize:
+            info["true_params"] = {
+                name: np.array(np.broadcast_to(plant.true_params[name], (self.num_envs,)),
+                               dtype=np.float64) for name in plant.randomize}
+        if plant.burst:
+            info["burst"] = np.zeros(self.num_envs) if delta is None else \
+                np.asarray(delta, dtype=np.float64).copy()
 
     def _rng(self, rows: np.ndarray) -> Any:
         """The generator the plant's hooks draw from for the systems ``rows`` (a mask)."""
@@ -363,3 +439,17 @@ class RowGenerators:
             if r:
                 out[i] = g.standard_normal(shape)
         return out
+
+    def uniform(self, low: float = 0.0, high: float = 1.0, size: Any = None) -> FloatArray:
+        """One ``uniform(low, high)`` draw (a float, as a single env draws it) per selected
+        system, as an array of ``size`` rows: the selected ones (``rows.sum()``), or all of
+        them with zeros for the unselected (which do not draw)."""
+        n = int(size if isinstance(size, (int, np.integer)) else next(iter(size)))
+        picked = [g for g, r in zip(self.generators, self.rows.tolist(), strict=True) if r]
+        if n == len(picked):
+            return np.array([g.uniform(low, high) for g in picked], dtype=np.float64)
+        if n != len(self.generators):
+            raise ValueError(f"a batched draw must have {len(self.generators)} or "
+                             f"{len(picked)} rows; got size {size}")
+        return np.array([g.uniform(low, high) if r else 0.0
+                         for g, r in zip(self.generators, self.rows.tolist(), strict=True)])

@@ -117,8 +117,11 @@ class CarrierMotionEnv(PlantEnv):
     ``gym.make("fir_gym/CarrierMotion-v0", sample_period=0.1, q=0.035, v=1.0,
     delta22=0.0, delta_c=0.0, a21=-0.36, a22=-0.06, noise_input=(0.6, -0.036),
     c_max=1.0, nominal=None, initial_state=(0, 0), initial_state_cov="stationary",
-    max_episode_steps=1000, render_mode=None)``. ``nominal`` may change any of
-    ``q, v, delta22, delta_c, a21, a22, noise_input, sample_period`` for the model.
+    max_episode_steps=1000, randomize=None, burst=None, render_mode=None)``. ``nominal``
+    may change any of ``q, v, delta22, delta_c, a21, a22, noise_input, sample_period``
+    for the model. ``randomize`` draws the true ``a21`` and ``a22`` (the sea's stiffness
+    and damping terms) around the nominal ones every episode; ``burst`` stretches the
+    increments over a window of steps (docs/robustness.md#plant-conditions).
 
     ## Version History
 
@@ -136,6 +139,8 @@ class CarrierMotionEnv(PlantEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
     default_max_episode_steps: ClassVar[int] = 1000
     cost_cap: float = 100.0
+    #: the motion's stiffness and damping terms (a fraction below 1 keeps them stable)
+    randomizable: ClassVar[tuple[str, ...]] = ("a21", "a22")
 
     def __init__(
         self,
@@ -153,6 +158,8 @@ class CarrierMotionEnv(PlantEnv):
         initial_state: ArrayLike = (0.0, 0.0),
         initial_state_cov: ArrayLike | str | None = "stationary",
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
         render_mode: str | None = None,
     ) -> None:
         noise_input_ = np.asarray(noise_input, dtype=np.float64)
@@ -179,20 +186,40 @@ class CarrierMotionEnv(PlantEnv):
                 raise ValueError("initial_state_cov must be 'stationary', None or a 2x2 "
                                  f"covariance; got {initial_state_cov!r}")
             initial_state_cov = self.stationary_cov
-        A_d, Q_d, C, R_d = carrier_discrete(params)
+        _, _, C, R_d = carrier_discrete(params)
         super().__init__(params=params, nominal=nominal,
                          default_nominal={"delta22": 0.0, "delta_c": 0.0},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=R_d, render_mode=render_mode,
-                         max_episode_steps=max_episode_steps)
-        self._A_d, self._C = A_d, C
-        self._process_sqrt = psd_sqrt(Q_d)
+                         max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
+        self._C = C
+        self._apply_params(self.params)
         # reward normaliser; a calm sea (q = 0) has no stationary spread, use 1
         self._sigma1 = float(np.sqrt(self.stationary_cov[0, 0])) or 1.0
 
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        """``A_d`` and the square root of ``Q_d`` of the true system: one pair, or one per
+        system where ``a21``/``a22`` hold one value per system."""
+        if not any(isinstance(params[name], np.ndarray) for name in self.randomizable):
+            A_d, Q_d, _, _ = carrier_discrete(params)
+            self._A_d, self._process_sqrt = A_d, psd_sqrt(Q_d)
+            return
+        n = max(np.size(params[name]) for name in self.randomizable)
+        columns = {name: np.broadcast_to(np.asarray(params[name], dtype=np.float64), (n,))
+                   for name in self.randomizable}
+        rows = [carrier_discrete({**params, **{name: float(c[i]) for name, c in columns.items()}})
+                for i in range(n)]
+        self._A_d = np.stack([r[0] for r in rows])
+        self._process_sqrt = np.stack([psd_sqrt(r[1]) for r in rows])
+
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
-        x_next = x @ self._A_d.T + rng.standard_normal(x.shape) @ self._process_sqrt.T
+        noise = rng.standard_normal(x.shape)
+        if self._A_d.ndim == 2:
+            x_next = x @ self._A_d.T + noise @ self._process_sqrt.T
+        else:           # one true system per row (randomized): each row as one system's
+            x_next = ((x[:, None, :] @ self._A_d.mT)[:, 0, :]
+                      + (noise[:, None, :] @ self._process_sqrt.mT)[:, 0, :])
         return x_next, {"compensator_offset": a[..., 0] * self.c_max}
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:

@@ -13,6 +13,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, psd_sqrt, saturated_cost
+from ._conditions import column, entry, per_system
 from ._interval_kernels import orbit_interval
 
 TRUE_MU = 19.92244165
@@ -31,10 +32,22 @@ class OrbitDynamics(FirstStateMeasured):
     thrust acceleration, held over the interval. The Jacobian of the interval map is
     the product of the Euler Jacobians ``I + Δ [[0, 1], [2μ/x1³, 0]]`` along the path.
     Batched over a leading axis; picklable (the model's callables are its methods).
+    ``mu`` and ``thrust_max`` are numbers, or one per system of a batch (``(B,)`` arrays: a
+    native vector env's per-episode true parameters, :mod:`._conditions`).
     """
 
-    def __init__(self, mu: float, euler_dt: float, substeps: int, thrust_max: float) -> None:
+    def __init__(self, mu: Any, euler_dt: float, substeps: int, thrust_max: Any) -> None:
         self.mu, self.euler_dt, self.substeps, self.thrust_max = mu, euler_dt, substeps, thrust_max
+        self._per_system = per_system(mu, thrust_max)
+        #: the parameters as the compiled loop takes them
+        self._columns = (column(mu), column(thrust_max))
+
+    def row(self, i: int) -> OrbitDynamics:
+        """The dynamics of system ``i`` (numbers for its parameters)."""
+        if not self._per_system:
+            return self
+        return OrbitDynamics(entry(self.mu, i), self.euler_dt, self.substeps,
+                             entry(self.thrust_max, i))
 
     def propagate(self, x: FloatArray, u: FloatArray, jacobian: bool = False
                   ) -> tuple[FloatArray, FloatArray | None]:
@@ -48,26 +61,30 @@ class OrbitDynamics(FirstStateMeasured):
         if compiled.ENABLED:                 # the same loop compiled: same bits
             u = np.asarray(u, dtype=np.float64)
             x_next, J = orbit_interval(np.asarray(x, dtype=np.float64).reshape(-1, 2),
-                                       u.reshape(-1, u.shape[-1]), self.substeps, self.mu,
-                                       self.euler_dt, self.thrust_max, jacobian)
+                                       u.reshape(-1, u.shape[-1]), self.substeps,
+                                       self._columns[0], self.euler_dt, self._columns[1],
+                                       jacobian)
             return x_next.reshape(lead + (2,)), J.reshape(lead + (2, 2)) if jacobian else None
         if x.ndim == 2 and 1 < x.shape[0] <= SMALL_BATCH:
             # a few systems (e.g. a UKF's sigma points): row by row in floats, bit for bit
             # the batched loop and ~10x faster where numpy's per-call cost dominates
             U = np.broadcast_to(u, (x.shape[0], u.shape[-1]))
-            rows = [self.propagate(x[i], U[i], jacobian) for i in range(x.shape[0])]
+            rows = [self.row(i).propagate(x[i], U[i], jacobian) for i in range(x.shape[0])]
             return (np.array([r[0] for r in rows]),
                     np.array([r[1] for r in rows]) if jacobian else None)
         r: Any                                     # floats (one system) or arrays (a batch)
         v: Any
         a: Any
+        mu: Any
         if single:
             r, v = float(x.flat[0]), float(x.flat[1])
-            a = float(np.asarray(u).flat[0]) * self.thrust_max
+            a = float(np.asarray(u).flat[0]) * entry(self.thrust_max, 0)
+            mu = entry(self.mu, 0)
         else:
             r, v = x[..., 0], x[..., 1]
             a = u[..., 0] * self.thrust_max
-        d, mu = self.euler_dt, self.mu
+            mu = self.mu
+        d = self.euler_dt
         j11, j12, j21, j22 = 1.0, 0.0, 0.0, 1.0
         for _ in range(self.substeps):
             if jacobian:
@@ -164,9 +181,12 @@ class OrbitEnv(PlantEnv):
     ``gym.make("fir_gym/Orbit-v0", mu=19.92244165, R=1e-3, Q=None, euler_dt=1e-4,
     substeps=100, thrust_max=1.0, r_ref=8.0, nominal={"mu": 19.91},
     initial_state=(7.99, 1.99), initial_state_cov=None, max_episode_steps=1000,
-    render_mode=None)``.
+    randomize=None, burst=None, render_mode=None)``.
     ``nominal`` lists parameters the model believes differently from the truth
-    (keys: ``mu, R, Q, euler_dt, substeps, thrust_max``).
+    (keys: ``mu, R, Q, euler_dt, substeps, thrust_max``). ``randomize`` draws the true
+    ``mu`` and ``thrust_max`` around the nominal ones every episode (the ``mismatch``
+    condition draws both), ``burst`` stretches the increments over a window of steps
+    (docs/robustness.md#plant-conditions).
 
     ## Version History
 
@@ -178,6 +198,8 @@ class OrbitEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("thrust",)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
     default_max_episode_steps: ClassVar[int] = 1000
+    #: the gravitational parameter and the thruster's gain
+    randomizable: ClassVar[tuple[str, ...]] = ("mu", "thrust_max")
 
     def __init__(
         self,
@@ -195,6 +217,8 @@ class OrbitEnv(PlantEnv):
         initial_state: ArrayLike = (7.99, 1.99),
         initial_state_cov: ArrayLike | None = None,
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
         render_mode: str | None = None,
     ) -> None:
         params = {
@@ -213,11 +237,14 @@ class OrbitEnv(PlantEnv):
         super().__init__(params=params, nominal=nominal, default_nominal={"mu": NOMINAL_MU},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"], render_mode=render_mode,
-                         max_episode_steps=max_episode_steps)
-        self._dynamics = OrbitDynamics(self.params["mu"], self.params["euler_dt"],
-                                       self.params["substeps"], self.params["thrust_max"])
+                         max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
         self._process_sqrt = psd_sqrt(self.params["Q"])
         self._has_process_noise = bool(np.any(self.params["Q"]))
+        self._apply_params(self.params)
+
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        self._dynamics = OrbitDynamics(params["mu"], params["euler_dt"], params["substeps"],
+                                       params["thrust_max"])
 
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:

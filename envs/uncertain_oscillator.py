@@ -13,6 +13,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, po
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, saturated_cost
+from ._conditions import Window, burst_delta, check_burst
 
 UNCERTAINTY_READINGS = ("state", "rate")
 PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
@@ -152,7 +153,11 @@ class UncertainOscillatorEnv(PlantEnv):
     ``(k_first, k_last, δ)`` (inclusive; ``k`` indexes the transition from
     ``x[k]`` to ``x[k+1]``); overlapping windows add. The model always uses
     δ = 0; ``nominal`` may change ``Q, R, dt, stiffness, damping_gain, drive,
-    u_max`` for the model.
+    u_max`` for the model. ``randomize`` draws the true ``stiffness``,
+    ``damping_gain``, ``drive`` and ``u_max`` around the nominal ones every episode;
+    ``burst`` windows (docs/robustness.md#plant-conditions) are added to the δ schedule,
+    so they act through eq (29) in the plant's reading (``info["burst"]`` is their part,
+    ``info["delta"]`` the whole δ).
 
     ## Version History
 
@@ -165,12 +170,14 @@ class UncertainOscillatorEnv(PlantEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012
     default_max_episode_steps: ClassVar[int] = 500
     cost_cap: float = 2.25
+    #: the spring, the damping gain, the constant drive and the actuator's gain
+    randomizable: ClassVar[tuple[str, ...]] = ("stiffness", "damping_gain", "drive", "u_max")
 
     def __init__(
         self,
         *,
         uncertainty: str = "state",
-        delta_schedule: Sequence[tuple[int, int, float]] = PAPER_DELTA_SCHEDULE,
+        delta_schedule: Sequence[Window] = PAPER_DELTA_SCHEDULE,
         Q: float = 0.4,
         R: float = 0.1,
         dt: float = 0.01,
@@ -184,11 +191,13 @@ class UncertainOscillatorEnv(PlantEnv):
         initial_state: ArrayLike = (0.0, 0.0, 0.5),
         initial_state_cov: ArrayLike | None = None,
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
         render_mode: str | None = None,
     ) -> None:
         one_of("uncertainty", uncertainty, UNCERTAINTY_READINGS)
         self.uncertainty = uncertainty
-        self.delta_schedule = _check_schedule(delta_schedule)
+        self.delta_schedule = check_burst(delta_schedule, "delta_schedule")
         params = {
             "Q": as_covariance("Q", Q, 1),
             "R": as_covariance("R", R, 1, definite=True),
@@ -203,17 +212,28 @@ class UncertainOscillatorEnv(PlantEnv):
         super().__init__(params=params, nominal=nominal, default_nominal=None,
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"], render_mode=render_mode,
-                         max_episode_steps=max_episode_steps)
-        self._dynamics = self._make_dynamics(self.params, uncertainty)
+                         max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
         self._noise_std = float(np.sqrt(self.params["Q"][0, 0]))
+        self._apply_params(self.params)
+
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        self._dynamics = self._make_dynamics(params, self.uncertainty)
 
     def delta(self, k: Any) -> Any:
-        """The true uncertainty δ_k of the transition from x[k] to x[k+1] (k: int or array)."""
+        """The true uncertainty δ_k of the transition from x[k] to x[k+1] (k: int or array):
+        the δ schedule's and the burst's windows, added."""
         k_ = np.asarray(k)
         total = np.zeros(k_.shape)
         for first, last, d in self.delta_schedule:
             total = total + d * ((first <= k_) & (k_ <= last))
+        if self.burst:
+            total = total + burst_delta(self.burst, k_)
         return float(total) if total.ndim == 0 else total
+
+    def _perturb(self, x: FloatArray, x_next: FloatArray, extra: dict[str, Any], delta: Any
+                 ) -> tuple[FloatArray, dict[str, Any]]:
+        """The burst is already in the transition's δ (:meth:`delta`): nothing to add."""
+        return x_next, extra
 
     @staticmethod
     def _make_dynamics(params: Mapping[str, Any], uncertainty: str) -> OscillatorDynamics:
@@ -266,24 +286,3 @@ class UncertainOscillatorEnv(PlantEnv):
     def _measurement_picture(self, y: FloatArray) -> list[tuple[FloatArray, FloatArray | None]]:
         """The measured position ``x1``."""
         return [(np.array([float(y[0]), -0.1]), None)]
-
-
-Window = tuple[int, int, float]
-
-
-def _check_schedule(schedule: Sequence[Window]) -> tuple[Window, ...]:
-    out = []
-    try:
-        for first, last, delta in schedule:
-            first_, last_ = int(first), int(last)
-            if first_ != first or last_ != last or first_ < 0 or last_ < first_:
-                raise ValueError
-            if not np.isfinite(float(delta)) or float(delta) <= -1.0:
-                raise ValueError
-            out.append((first_, last_, float(delta)))
-    except (TypeError, ValueError):
-        raise ValueError(
-            "delta_schedule must be a sequence of (k_first, k_last, delta) with integer "
-            f"0 <= k_first <= k_last and finite delta > -1; got {schedule!r}"
-        ) from None
-    return tuple(out)

@@ -15,6 +15,7 @@ from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, saturated_cost
+from ._conditions import column, entry, per_system
 from ._interval_kernels import heun_interval
 
 NOISE_INPUT = np.array([1.0, 1.0])
@@ -36,11 +37,24 @@ class VanDerPolDynamics(FirstStateMeasured):
     :meth:`A_of_x` is the state-dependent factorisation ``a(x) = A(x) x`` (for
     ``u = 0``) that paper 002's adaptive piecewise linearisation freezes on each
     block-pulse interval: ``A(x) = [[0, 1], [-1, ε (1 - x1²)]]``.
+
+    ``epsilon`` and ``u_max`` are numbers, or one per system of a batch (``(B,)`` arrays: a
+    native vector env's per-episode true parameters, :mod:`._conditions`).
     """
 
-    def __init__(self, epsilon: float, h: float, substeps: int, u_max: float) -> None:
+    def __init__(self, epsilon: Any, h: float, substeps: int, u_max: Any) -> None:
         self.epsilon, self.interval, self.substeps, self.u_max = epsilon, h, substeps, u_max
         self.tau = h / substeps
+        self._per_system = per_system(epsilon, u_max)
+        #: the parameters as the compiled loop takes them
+        self._columns = (column(epsilon), column(u_max))
+
+    def row(self, i: int) -> VanDerPolDynamics:
+        """The dynamics of system ``i`` (numbers for its parameters)."""
+        if not self._per_system:
+            return self
+        return VanDerPolDynamics(entry(self.epsilon, i), self.interval, self.substeps,
+                                 entry(self.u_max, i))
 
     def drift(self, x: FloatArray, u: FloatArray) -> FloatArray:
         """The continuous drift ``a(x, u) = [x2, -x1 + ε (1 - x1²) x2 + u_max u]``."""
@@ -84,13 +98,16 @@ class VanDerPolDynamics(FirstStateMeasured):
         x1: Any                                    # floats (one system) or arrays (a batch)
         x2: Any
         force: Any
+        eps: Any
         if single:
             x1, x2 = float(x.flat[0]), float(x.flat[1])
-            force = float(np.asarray(u).flat[0]) * self.u_max
+            force = float(np.asarray(u).flat[0]) * entry(self.u_max, 0)
+            eps = entry(self.epsilon, 0)
         else:
             x1, x2 = x[..., 0], x[..., 1]
             force = u[..., 0] * self.u_max
-        tau, eps, half = self.tau, self.epsilon, 0.5 * self.tau
+            eps = self.epsilon
+        tau, half = self.tau, 0.5 * self.tau
         if dW is None:
             noise: list[Any] = [0.0] * self.substeps
         else:  # floats for one system, (B,) rows for a batch
@@ -139,8 +156,8 @@ class VanDerPolDynamics(FirstStateMeasured):
         x_end, x1_mean, Phi = heun_interval(
             np.asarray(x, dtype=np.float64).reshape(-1, 2), u.reshape(-1, u.shape[-1]),
             _NO_NOISE if dW is None else np.asarray(dW, dtype=np.float64).reshape(
-                self.substeps, -1), dW is not None, self.substeps, self.epsilon, self.tau,
-            self.u_max, jacobian)
+                self.substeps, -1), dW is not None, self.substeps, self._columns[0], self.tau,
+            self._columns[1], jacobian)
         return (x_end.reshape(lead + (2,)), x1_mean.reshape(lead) if lead else float(x1_mean[0]),
                 Phi.reshape(lead + (2, 2)) if jacobian else None)
 
@@ -153,7 +170,7 @@ class VanDerPolDynamics(FirstStateMeasured):
         cost dominates the ~30 array operations of each Heun step.
         """
         U = np.broadcast_to(u, (x.shape[0], u.shape[-1]))
-        rows = [self.integrate(x[i], U[i], None if dW is None else dW[:, i], jacobian)
+        rows = [self.row(i).integrate(x[i], U[i], None if dW is None else dW[:, i], jacobian)
                 for i in range(x.shape[0])]
         x_end = np.array([r[0] for r in rows])
         x1_mean = np.array([r[1] for r in rows], dtype=np.float64)
@@ -255,8 +272,12 @@ class VanDerPolEnv(PlantEnv):
     ``gym.make("fir_gym/VanDerPol-v0", epsilon=1.0, Q=5.0, R=5.0, h=0.1,
     substeps=100, u_max=20.0, state_bound=20.0, nominal=None,
     initial_state=(1, 1), initial_state_cov=None, max_episode_steps=100,
-    render_mode=None)``.
+    randomize=None, burst=None, render_mode=None)``.
     ``nominal`` may change ``epsilon, Q, R, h, substeps, u_max`` for the model.
+    ``randomize`` draws the true ``epsilon`` and ``u_max`` around the nominal ones every
+    episode (the Heun check above then uses the largest ``ε`` it can draw); ``burst``
+    stretches the path over a window of steps, its end and the interval average alike
+    (docs/robustness.md#plant-conditions).
 
     ## Version History
 
@@ -268,6 +289,8 @@ class VanDerPolEnv(PlantEnv):
     action_names: ClassVar[tuple[str, ...]] = ("force",)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
     default_max_episode_steps: ClassVar[int] = 100
+    #: the nonlinearity and the actuator's gain
+    randomizable: ClassVar[tuple[str, ...]] = ("epsilon", "u_max")
 
     def __init__(
         self,
@@ -283,6 +306,8 @@ class VanDerPolEnv(PlantEnv):
         initial_state: ArrayLike = (1.0, 1.0),
         initial_state_cov: ArrayLike | None = None,
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
         render_mode: str | None = None,
     ) -> None:
         Q_ = float(Q)
@@ -300,19 +325,27 @@ class VanDerPolEnv(PlantEnv):
         self.cost_cap = self.state_bound ** 2 / 2.0 + 0.01
         # Heun is stable for real eigenvalues z = λτ in [-2, 0]; near |x1| = b the
         # stiff eigenvalue is about -ε b², so keep ε b² τ <= 0.5 for accuracy.
-        tau = params["h"] / params["substeps"]
-        if abs(params["epsilon"]) * self.state_bound**2 * tau > 0.5:
-            raise ValueError(
-                f"state_bound={state_bound} is too large for substeps={substeps}: the Heun "
-                f"step needs |epsilon| * state_bound² * h / substeps <= 0.5 (got "
-                f"{abs(params['epsilon']) * self.state_bound**2 * tau:.3g}); raise substeps"
-            )
         super().__init__(params=params, nominal=nominal, default_nominal=None,
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"] / params["h"], render_mode=render_mode,
-                         max_episode_steps=max_episode_steps)
-        self._dynamics = self._make_dynamics(self.params)
+                         max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
+        tau = params["h"] / params["substeps"]
+        # the largest ε an episode can have (a randomized one is drawn around the nominal)
+        eps_max = max(abs(params["epsilon"]), abs(self.nominal_params["epsilon"])
+                      * (1.0 + self.randomize.get("epsilon", 0.0)))
+        if eps_max * self.state_bound**2 * tau > 0.5:
+            raise ValueError(
+                f"state_bound={state_bound} is too large for substeps={substeps}: the Heun "
+                f"step needs |epsilon| * state_bound² * h / substeps <= 0.5 (got "
+                f"{eps_max * self.state_bound**2 * tau:.3g}"
+                + (" with randomize's largest epsilon" if "epsilon" in self.randomize else "")
+                + "); raise substeps"
+            )
+        self._apply_params(self.params)
         self._trail: list[tuple[float, float]] = []
+
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        self._dynamics = self._make_dynamics(params)
 
     @staticmethod
     def _make_dynamics(params: Mapping[str, Any]) -> VanDerPolDynamics:
@@ -354,6 +387,15 @@ class VanDerPolEnv(PlantEnv):
             rng.standard_normal(x.shape[:-1] + (dyn.substeps,)), -1, 0)
         x_next, x1_average, _ = dyn.integrate(x, a, dW)
         return x_next, {"x1_average": x1_average}
+
+    def _perturb(self, x: FloatArray, x_next: FloatArray, extra: dict[str, Any], delta: Any
+                 ) -> tuple[FloatArray, dict[str, Any]]:
+        """The burst stretches the whole path over the step about its start: its end and the
+        interval average of ``x1`` (what the sensor integrates) alike."""
+        x_next, extra = super()._perturb(x, x_next, extra, delta)
+        x1 = x[..., 0]
+        average = x1 + (1.0 + np.asarray(delta)) * (np.asarray(extra["x1_average"]) - x1)
+        return x_next, {**extra, "x1_average": average if np.ndim(average) else float(average)}
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         if extra is None:                        # the measurement reset returns: x1(0)
