@@ -194,7 +194,9 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
                                   else as_covariance("initial_state_cov", initial_state_cov, n_x))
         self._initial_sqrt = psd_sqrt(self.initial_state_cov)
         n_y = len(self.measurement_names)
-        self._measurement_sqrt = psd_sqrt(as_covariance("measurement_cov", measurement_cov, n_y))
+        #: the covariance of the true measurement noise (the plant's, not the model's)
+        self.measurement_cov = as_covariance("measurement_cov", measurement_cov, n_y)
+        self._measurement_sqrt = psd_sqrt(self.measurement_cov)
 
         n_u = len(self.action_names)
         # float32 actions (what stable-baselines3 produces); the plant computes in float64.

@@ -190,7 +190,10 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     On ``reset`` the estimator is reset to its prior and consumes ``y[0]`` (an
     update only); on ``step(u)`` it consumes ``y[k]`` with the *applied* input
-    ``info["action"]`` (after the plant's clipping). ``info`` gains ``estimate``,
+    ``info["action"]`` (after the plant's clipping). A step whose
+    ``info["measurement_missing"]`` is True (a :class:`~fir_gym.wrappers.SensorFaults`
+    reading that was dropped, stuck, not sampled or not yet due) gives the estimator no
+    measurement: it predicts only (``step(None, u)``). ``info`` gains ``estimate``,
     ``estimation_error`` (``state - estimate``, where the true state is known),
     ``estimator_diverged`` and ``estimator_info`` (the filter's ``last_info``). A
     filter that diverges keeps returning its last finite estimate and says so;
@@ -248,14 +251,14 @@ class EstimatorObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
               ) -> tuple[Any, dict[str, Any]]:
         y, info = self.env.reset(seed=seed, options=options)
         self.estimator.reset(self._x0, self._P0)
-        x_hat = self.estimator.step(y)
+        x_hat = self.estimator.step(None if info.get("measurement_missing") else y)
         self._remember(x_hat, y)
         return self._observe(x_hat, y), self._annotate(info, x_hat)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         y, reward, terminated, truncated, info = self.env.step(action)
         u = info.get("action", action)
-        x_hat = self.estimator.step(y, u)
+        x_hat = self.estimator.step(None if info.get("measurement_missing") else y, u)
         self._remember(x_hat, y)
         return self._observe(x_hat, y), reward, terminated, truncated, self._annotate(info, x_hat)
 

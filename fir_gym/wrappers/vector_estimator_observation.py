@@ -45,7 +45,9 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
     When a sub-env ends an episode, the next step autoresets it (returning ``y[0]``
     of a new episode): its system is then restarted (:meth:`Estimator.restart`) and
     that measurement is its first, exactly as a fresh one-env
-    :class:`EstimatorObservation` would do. In same-step mode the sub-env returns the
+    :class:`EstimatorObservation` would do. Where ``info["measurement_missing"]`` is True
+    (:class:`~fir_gym.wrappers.VectorSensorFaults`) that system's measurement is masked: it
+    predicts only. In same-step mode the sub-env returns the
     new episode's first measurement in the step that ended the old one, with the last
     one in ``info["final_obs"]``: a copy of the estimator consumes the last
     measurements (their estimates become ``info["final_obs"]``, and
@@ -105,7 +107,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         y, info = env.reset(seed=seed, options=options)
         self.estimator.reset(self.estimator._x0, self.estimator._P0)
         Y = self._measurements(y)
-        x_hat = self.estimator.step(Y)
+        x_hat = self.estimator.step(_masked(Y, info.get("measurement_missing")))
         self._prev_done[:] = False
         self._last = (x_hat.copy(), Y)
         return self._observe(x_hat, y), self._annotate(info, x_hat)
@@ -120,7 +122,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         ended = info.get("_final_obs") if self._same_step else None
         if ended is not None and ended.any():
             info = self._finish_episodes(info, ended, Y, u)
-        x_hat = self.estimator.step(Y, u)
+        x_hat = self.estimator.step(_masked(Y, info.get("measurement_missing")), u)
         if not self._same_step:
             self._prev_done = np.logical_or(terminated, truncated)
         self._last = (x_hat.copy(), Y)
@@ -135,10 +137,12 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
         for i in np.flatnonzero(ended):
             last[i] = np.asarray(final[i], dtype=np.float64).reshape(-1)
         finisher = copy.deepcopy(self.estimator)      # the others' step is not taken twice
-        x_last = finisher.step(last, u)
+        final_info = info.get("final_info")
+        missing = final_info.get("measurement_missing") if isinstance(final_info, dict) \
+            else None
+        x_last = finisher.step(_masked(last, missing), u)
         info = dict(info)
         info["final_obs"] = self._observe(x_last, last, finisher)
-        final_info = info.get("final_info")
         if isinstance(final_info, dict):
             info["final_info"] = self._annotate(final_info, x_last, finisher)
         self.estimator.restart(ended)
@@ -191,6 +195,15 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
             np.full(self.num_envs, bool(diverged))
         info["_estimator_diverged"] = everyone
         return info
+
+
+def _masked(Y: NDArray[np.float64], missing: Any) -> Any:
+    """``Y`` with the rows of the systems whose reading is missing masked (the estimator
+    predicts only there), or ``Y`` itself when none is."""
+    if missing is None or not np.any(missing):
+        return Y
+    rows = np.asarray(missing, dtype=bool)
+    return np.ma.masked_array(Y, mask=np.broadcast_to(rows[:, None], Y.shape))
 
 
 def same_step_mode(env: VectorEnv, wrapper: str) -> bool:
