@@ -36,6 +36,12 @@ def cmd_list(args: argparse.Namespace) -> int:
     print(format_table(["environment", "max steps", "state", "measurement", "action"], rows))
     print()
     print("estimators:", ", ".join(estimator_names()) or "(none registered)")
+    from .conditions import describe_conditions
+
+    print()
+    print("conditions (fir-gym benchmark-robustness --conditions; docs/robustness.md):")
+    print(format_table(["condition", "strength", "benchmark strengths", "what it does"],
+                       describe_conditions()))
     return 0
 
 

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
     from .factory import wrap_observation
     from .measurement_stack import MeasurementStack, VectorMeasurementStack
+    from .sensor_faults import SensorFaults, VectorSensorFaults
     from .shadow import ShadowEstimator
     from .vector_estimator_observation import VectorEstimatorObservation
 
@@ -24,6 +25,8 @@ _MODULES = {
     "EstimatorObservation": "estimator_observation",
     "MeasurementObservation": "baselines",
     "MeasurementStack": "measurement_stack",
+    "SensorFaults": "sensor_faults",
+    "VectorSensorFaults": "sensor_faults",
     "ShadowEstimator": "shadow",
     "TrueStateObservation": "baselines",
     "VectorEstimatorObservation": "vector_estimator_observation",
@@ -37,10 +40,12 @@ __all__ = [
     "EstimatorObservation",
     "MeasurementObservation",
     "MeasurementStack",
+    "SensorFaults",
     "ShadowEstimator",
     "TrueStateObservation",
     "VectorEstimatorObservation",
     "VectorMeasurementStack",
+    "VectorSensorFaults",
     "default_prior",
     "wrap_observation",
 ]

@@ -45,6 +45,7 @@ def make_plant(
     estimator: Any = None,
     estimator_kwargs: Mapping[str, Any] | None = None,
     observation: str | None = None,
+    sensor_faults: Mapping[str, Any] | None = None,
     **plant_kwargs: Any,
 ) -> gym.Env:
     """Build ``plant(**plant_kwargs)``, wrapped as the estimator/observation options ask.
@@ -52,7 +53,9 @@ def make_plant(
     Without ``estimator``, ``observation`` may be ``None``/``"measurement"`` (the
     plant's own observation) or ``"true"`` (the true state). With ``estimator``, the
     plant is wrapped in :class:`EstimatorObservation` with ``observation`` (default
-    ``"estimate"``) and ``estimator_kwargs``.
+    ``"estimate"``) and ``estimator_kwargs``. ``sensor_faults`` (the keywords of
+    :class:`~fir_gym.wrappers.SensorFaults`) puts a faulty sensor between the plant and
+    the rest; its ``delay`` is told to the estimator unless ``estimator_kwargs`` sets one.
     """
     from .baselines import TrueStateObservation
     from .estimator_observation import EstimatorObservation
@@ -61,6 +64,16 @@ def make_plant(
     env = creator(**plant_kwargs)
     if not isinstance(env, gym.Env):
         raise TypeError(f"plant must build a gymnasium Env; {plant!r} built {type(env).__name__}")
+    if sensor_faults:
+        from .sensor_faults import SensorFaults
+
+        if not isinstance(sensor_faults, Mapping):
+            raise TypeError("sensor_faults must be a mapping of SensorFaults keywords, e.g. "
+                            f"{{'dropout': 0.1}}; got {type(sensor_faults).__name__}")
+        env = SensorFaults(env, **dict(sensor_faults))
+        delay = int(sensor_faults.get("delay", 0) or 0)
+        if estimator is not None and delay and "delay" not in (estimator_kwargs or {}):
+            estimator_kwargs = {**dict(estimator_kwargs or {}), "delay": delay}
     if estimator is None:
         if estimator_kwargs:
             raise ValueError("estimator_kwargs given without an estimator")
