@@ -3,17 +3,22 @@
 A condition is a way the world differs from what the estimator and the controller were
 designed for, at a *strength* (docs/robustness.md#conditions):
 
-| name | strength | what it does |
-|---|---|---|
-| ``nominal`` | — | nothing: the plant, its model and a clean sensor |
-| ``mismatch`` | relative spread ``s`` in ``[0, 1)`` | every randomizable parameter of the plant drawn per episode as ``θ_nominal (1 + s ξ)``, ``ξ ~ U(−1, 1)``; the model keeps the nominal values |
-| ``burst`` | ``δ > −1`` | paper 000's temporary model uncertainty on any plant: the state's increment stretched by ``1 + δ`` over a window of a tenth of the episode from its middle |
-| ``dropout`` | probability in ``[0, 1]`` | each reading lost |
-| ``outliers`` | probability in ``[0, 1]`` | a reading gets an extra 20 standard deviations of the measurement noise (ε-contamination) |
-| ``stuck`` | probability in ``[0, 1]`` | a working sensor freezes (10 steps on average; detected, so the reading is missing) |
-| ``bias`` | standard deviations | from the episode's middle, an undetected offset of that many measurement-noise standard deviations on every channel |
-| ``delay`` | steps (integer ≥ 1) | readings arrive that many steps late; the estimator is told (it filters ``y[k − d]`` and predicts ahead) |
-| ``multirate`` | steps (integer ≥ 2) | the sensor samples every that many steps |
+* ``nominal`` — nothing: the plant, its model and a clean sensor;
+* ``mismatch`` (a relative spread ``s`` in ``[0, 1)``) — every randomizable parameter of
+  the plant drawn per episode as ``θ_nominal (1 + s ξ)``, ``ξ ~ U(−1, 1)``; the model
+  keeps the nominal values;
+* ``burst`` (``δ > −1``) — paper 000's temporary model uncertainty on any plant: the
+  state's increment stretched by ``1 + δ`` for a tenth of the episode from its middle;
+* ``dropout`` (a probability) — each reading lost;
+* ``outliers`` (a probability) — a reading gets an extra 20 standard deviations of the
+  measurement noise (ε-contamination);
+* ``stuck`` (a probability per step) — a working sensor freezes, 10 steps on average
+  (detected: the reading is missing);
+* ``bias`` (standard deviations) — from the episode's middle, an undetected offset of that
+  many measurement-noise standard deviations on every channel;
+* ``delay`` (steps, an integer ≥ 1) — readings arrive that many steps late; the estimator
+  is told (it filters ``y[k − d]`` and predicts ahead);
+* ``multirate`` (steps, an integer ≥ 2) — the sensor samples every that many steps.
 
 :func:`condition_setup` turns ``(name, strength)`` and a plant into what to build: the
 plant's keyword arguments (``randomize``, ``burst``), the arguments of

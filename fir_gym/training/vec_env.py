@@ -33,7 +33,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
 from fir_gym.estimators._validation import one_of
-from fir_gym.wrappers import MeasurementStack, VectorEstimatorObservation, wrap_observation
+from fir_gym.wrappers import (
+    MeasurementStack,
+    VectorEstimatorObservation,
+    VectorTrueStateObservation,
+    wrap_observation,
+)
 from fir_gym.wrappers.measurement_stack import VectorMeasurementStack
 
 #: what a controller may observe without an estimator
@@ -262,7 +267,7 @@ def _native(env_id: str, n: int, estimator: str | None, estimator_kwargs: dict[s
         venv = VectorEstimatorObservation(base, estimator, observation=observation,
                                           **estimator_kwargs)
     elif observation == "true":
-        venv = _VectorTrueState(base)
+        venv = VectorTrueStateObservation(base)
     elif observation == "measurement-stack":
         venv = VectorMeasurementStack(base, stack_horizon)
     return SB3VecEnv(venv, _observed(estimator, observation), plant)
@@ -312,26 +317,3 @@ def make_single_env(env_id: str, *, estimator: str | None = None,
     if observation == "measurement-stack":
         return MeasurementStack(env, stack_horizon)
     return wrap_observation(env, observation)
-
-
-class _VectorTrueState(gym.vector.VectorWrapper):
-    """The true states (``info["state"]``) as the observation of a fir-gym vector env."""
-
-    def __init__(self, env: VectorEnv) -> None:
-        super().__init__(env)
-        n_x = len(cast(Any, env.unwrapped).plant.state_names)
-        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(n_x,),
-                                                       dtype=np.float64)
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,
-                                                              self.num_envs)
-
-    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        _, info = self.env.reset(**kwargs)
-        return info["state"].copy(), info
-
-    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
-        _, reward, terminated, truncated, info = self.env.step(actions)
-        if "_final_obs" in info:
-            info = dict(info)
-            info["final_obs"] = info["final_info"]["state"].copy()
-        return info["state"].copy(), reward, terminated, truncated, info

@@ -11,7 +11,11 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .baselines import MeasurementObservation, TrueStateObservation
+    from .baselines import (
+        MeasurementObservation,
+        TrueStateObservation,
+        VectorTrueStateObservation,
+    )
     from .estimator_observation import OBSERVATION_KINDS, EstimatorObservation, default_prior
     from .factory import wrap_observation
     from .measurement_stack import MeasurementStack, VectorMeasurementStack
@@ -31,6 +35,7 @@ _MODULES = {
     "TrueStateObservation": "baselines",
     "VectorEstimatorObservation": "vector_estimator_observation",
     "VectorMeasurementStack": "measurement_stack",
+    "VectorTrueStateObservation": "baselines",
     "default_prior": "estimator_observation",
     "wrap_observation": "factory",
 }
@@ -46,6 +51,7 @@ __all__ = [
     "VectorEstimatorObservation",
     "VectorMeasurementStack",
     "VectorSensorFaults",
+    "VectorTrueStateObservation",
     "default_prior",
     "wrap_observation",
 ]

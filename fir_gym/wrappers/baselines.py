@@ -74,3 +74,32 @@ class MeasurementObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
+
+
+class VectorTrueStateObservation(gym.vector.VectorWrapper):
+    """:class:`TrueStateObservation` for a native fir-gym vector env: the true states
+    ``info["state"]`` ``(B, n_x)`` as the observation (next-step or same-step autoreset; in
+    same-step mode ``info["final_obs"]`` becomes the ended episodes' last states)."""
+
+    def __init__(self, env: gym.vector.VectorEnv) -> None:
+        super().__init__(env)
+        plant = getattr(env.unwrapped, "plant", None)
+        if plant is None:
+            raise TypeError("VectorTrueStateObservation needs a native fir-gym vector env "
+                            "(gym.make_vec(id, n, vectorization_mode='vector_entry_point'))")
+        n_x = len(plant.state_names)
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, shape=(n_x,),
+                                                   dtype=np.float64)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,
+                                                              self.num_envs)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        _, info = self.env.reset(**kwargs)
+        return info["state"].copy(), info
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        _, reward, terminated, truncated, info = self.env.step(actions)
+        if "_final_obs" in info:
+            info = dict(info)
+            info["final_obs"] = info["final_info"]["state"].copy()
+        return info["state"].copy(), reward, terminated, truncated, info
