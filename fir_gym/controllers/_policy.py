@@ -1,8 +1,10 @@
 """What the classical controllers share: stable-baselines3's ``predict`` and finding the plant.
 
 A controller is built for an env — a Gymnasium env (``gym.make(id, estimator=...)``,
-:func:`fir_gym.wrappers.wrap_observation`) or a stable-baselines3 ``VecEnv`` over such
-envs (:func:`fir_gym.training.make_sb3_vec_env`, ``DummyVecEnv``) — and reads from it
+:func:`fir_gym.wrappers.wrap_observation`), a native fir-gym vector env and its wrappers
+(``VectorEstimatorObservation``, ``VectorTrueStateObservation``) or a stable-baselines3
+``VecEnv`` over such envs (:func:`fir_gym.training.make_sb3_vec_env`, ``DummyVecEnv``) —
+and reads from it
 the plant (``env.unwrapped``: its nominal model and operating point) and what the
 controller sees (the true state, an estimate, or the raw measurement).
 ``predict(observation, state=None, episode_start=None, deterministic=True)`` has
@@ -29,12 +31,14 @@ def plant_of(env: Any) -> Any:
     """The fir-gym plant behind a Gymnasium env or a stable-baselines3 ``VecEnv``."""
     if isinstance(env, gym.Env):
         plant = env.unwrapped
+    elif isinstance(env, gym.vector.VectorEnv):        # a native vector env (wrapped)
+        plant = getattr(env.unwrapped, "plant", None)
     elif hasattr(env, "get_attr"):                     # a stable-baselines3 VecEnv
         plant = env.get_attr("unwrapped", [0])[0]
     else:
         raise TypeError(f"env must be a Gymnasium env or a stable-baselines3 VecEnv; got "
                         f"{type(env).__name__}")
-    if not hasattr(plant, "nominal_params"):
+    if plant is None or not hasattr(plant, "nominal_params"):
         raise TypeError(f"env must be a fir-gym plant (possibly wrapped); got "
                         f"{type(plant).__name__}")
     return plant
@@ -42,11 +46,24 @@ def plant_of(env: Any) -> Any:
 
 def seen_by(env: Any) -> str:
     """What ``env`` observes: ``"true"``, ``"estimate"`` or ``"measurement"``."""
-    from fir_gym.wrappers import EstimatorObservation, TrueStateObservation
+    from fir_gym.wrappers import (
+        EstimatorObservation,
+        TrueStateObservation,
+        VectorEstimatorObservation,
+        VectorTrueStateObservation,
+    )
 
     seen = getattr(env, "observed", None)             # fir-gym's SB3 VecEnv says it
     if seen is not None:
         return str(seen)
+    while isinstance(env, gym.vector.VectorWrapper):  # a native vector env's wrappers
+        if isinstance(env, VectorEstimatorObservation):
+            return "estimate"
+        if isinstance(env, VectorTrueStateObservation):
+            return "true"
+        env = env.env
+    if isinstance(env, gym.vector.VectorEnv):
+        return "measurement"
     if hasattr(env, "envs"):                           # DummyVecEnv: look at the first env
         env = env.envs[0]
     while isinstance(env, gym.Wrapper):

@@ -7,8 +7,10 @@ hands one job per (kind, seed) to :class:`fir_gym.scenarios.runner.Runner`. A jo
 trains (or designs) the controller in its own folder ``OUT/<kind>-seed<seed>`` and
 evaluates it on the same evaluation seeds as every other job; each draw comes from the
 job's own seeds, so the numbers are identical on every backend. A finished job writes
-``result.json``; with ``resume=True`` a job whose result exists is not run again, and
-an interrupted one continues from its latest checkpoint.
+``result.json`` with its configuration and :func:`~fir_gym.code_version.code_version`;
+with ``resume=True`` a job whose result exists with the same configuration *and* the same
+code version is not run again (at other code it is trained again from scratch), and an
+interrupted one continues from its latest checkpoint.
 """
 
 from __future__ import annotations
@@ -58,20 +60,27 @@ def validate(configs: Sequence[RunConfig]) -> None:
 
 def run_job(job: dict[str, Any]) -> dict[str, Any]:
     """Train and evaluate one (kind, seed): the runner's task (module-level: picklable)."""
+    from fir_gym.code_version import code_version
+
     config: RunConfig = job["config"]
     out = Path(job["run_dir"])
     result_file = out / "result.json"
-    if job.get("resume") and result_file.is_file():
+    version = code_version()
+    resume = bool(job.get("resume"))
+    if resume and result_file.is_file():
         saved = json.loads(result_file.read_text())
         if saved.get("config") == json.loads(config.to_json()):
-            return {**saved, "reused": True}
+            if saved.get("code_version") == version:
+                return {**saved, "reused": True}
+            resume = False              # the same job at other code: train it again
     start = time.perf_counter()
-    train(config, out, resume=bool(job.get("resume")))
+    train(config, out, resume=resume)
     trained = time.perf_counter() - start
     source = out if is_learned(config.observation_kind) else config
     result = evaluate(source, episodes=job["episodes"], seed=job["eval_seed"])
     summary = {"kind": config.observation_kind, "seed": config.seed,
-               "config": json.loads(config.to_json()), "mean": result.mean,
+               "config": json.loads(config.to_json()), "code_version": version,
+               "mean": result.mean,
                "train_seconds": trained, **result.to_dict()}
     result_file.write_text(json.dumps(summary, indent=1) + "\n")
     return summary

@@ -148,13 +148,22 @@ def train(config: RunConfig, out: str | Path, *, progress_bar: bool = False,
     """Train a controller as ``config`` says and save the run in ``out`` (module docstring).
 
     ``resume=True`` continues from the latest checkpoint in ``out/checkpoints`` (the
-    total budget stays ``steps``); a run whose ``model.zip`` exists is left as it is.
+    total budget stays ``steps``); a run whose ``model.zip`` exists is left as it is. Both
+    only when the folder's ``code_version.txt`` is this code's
+    (:func:`~fir_gym.code_version.code_version`): a run begun at other code, or without the
+    stamp, starts over.
     """
+    from fir_gym.code_version import code_version
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if not is_learned(config.observation_kind):
         (out / "run.json").write_text(config.to_json())
         return out
+    stamp = out / "code_version.txt"
+    if resume and (not stamp.is_file() or stamp.read_text().strip() != code_version()):
+        resume = False                  # begun at other code (or before the stamp existed)
+    stamp.write_text(code_version() + "\n")
     if resume and (out / "model.zip").is_file() and (out / "run.json").is_file():
         return out
     import torch

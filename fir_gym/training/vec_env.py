@@ -36,10 +36,12 @@ from fir_gym.estimators._validation import one_of
 from fir_gym.wrappers import (
     MeasurementStack,
     VectorEstimatorObservation,
+    VectorSensorFaults,
     VectorTrueStateObservation,
     wrap_observation,
 )
 from fir_gym.wrappers.measurement_stack import VectorMeasurementStack
+from fir_gym.wrappers.sensor_faults import with_known_delay
 
 #: what a controller may observe without an estimator
 PLAIN_OBSERVATIONS = ("measurement", "true", "measurement-stack")
@@ -210,8 +212,12 @@ def make_sb3_vec_env(
             ``DummyVecEnv``), ``"native"``, ``"dummy"`` or ``"subproc"``.
         generators: ``"shared"`` or ``"per_env"`` (native only; see the module docstring).
         stack_horizon: the window of ``observation="measurement-stack"``.
-        **env_kwargs: the plant's options, and ``max_episode_steps`` (the time limit,
-            given to both the plant and its truncation).
+        **env_kwargs: the plant's options (the plant conditions ``randomize`` and ``burst``
+            among them), ``max_episode_steps`` (the time limit, given to both the plant and
+            its truncation) and ``sensor_faults`` (the keywords of
+            :class:`~fir_gym.wrappers.SensorFaults`: a faulty sensor on every sub-env,
+            between the plant and the estimator; its ``delay`` is told to the estimator
+            unless ``estimator_kwargs`` sets one).
     """
     import fir_gym
 
@@ -227,6 +233,8 @@ def make_sb3_vec_env(
         one_of("observation", observation, PLAIN_OBSERVATIONS)
     if stack_horizon is not None and observation != "measurement-stack":
         raise ValueError("stack_horizon is an option of observation='measurement-stack'")
+    estimator_kwargs = with_known_delay(estimator, estimator_kwargs,
+                                        env_kwargs.get("sensor_faults"))
     native = env_id in fir_gym.VECTOR_ENV_IDS
     if vec_env == "native" and not native:
         raise ValueError(f"{env_id} has no native vector env; use vec_env='dummy' or 'subproc'")
@@ -258,10 +266,14 @@ def _observed(estimator: str | None, observation: str) -> str:
 def _native(env_id: str, n: int, estimator: str | None, estimator_kwargs: dict[str, Any],
             observation: str, generators: str, stack_horizon: int | None,
             env_kwargs: dict[str, Any]) -> SB3VecEnv:
-    base = gym.make_vec(env_id, n, vectorization_mode="vector_entry_point",
-                        vector_kwargs=None, autoreset_mode=AutoresetMode.SAME_STEP,
-                        generators=generators, **env_kwargs)
+    env_kwargs = dict(env_kwargs)
+    faults = env_kwargs.pop("sensor_faults", None)
+    base: VectorEnv = gym.make_vec(env_id, n, vectorization_mode="vector_entry_point",
+                                   vector_kwargs=None, autoreset_mode=AutoresetMode.SAME_STEP,
+                                   generators=generators, **env_kwargs)
     plant = cast(Any, base.unwrapped).plant
+    if faults:
+        base = VectorSensorFaults(base, **dict(faults))
     venv: VectorEnv = base
     if estimator is not None:
         venv = VectorEstimatorObservation(base, estimator, observation=observation,
@@ -312,7 +324,8 @@ def make_single_env(env_id: str, *, estimator: str | None = None,
         cast(Any, env.unwrapped).max_episode_steps = int(steps)
     if estimator is not None:
         return wrap_observation(env, estimator, observation=observation,
-                                **dict(estimator_kwargs or {}))
+                                **with_known_delay(estimator, estimator_kwargs,
+                                                   env_kwargs.get("sensor_faults")))
     observation = "measurement" if observation == "estimate" else observation
     if observation == "measurement-stack":
         return MeasurementStack(env, stack_horizon)

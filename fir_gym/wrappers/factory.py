@@ -65,15 +65,13 @@ def make_plant(
     if not isinstance(env, gym.Env):
         raise TypeError(f"plant must build a gymnasium Env; {plant!r} built {type(env).__name__}")
     if sensor_faults:
-        from .sensor_faults import SensorFaults
+        from .sensor_faults import SensorFaults, with_known_delay
 
         if not isinstance(sensor_faults, Mapping):
             raise TypeError("sensor_faults must be a mapping of SensorFaults keywords, e.g. "
                             f"{{'dropout': 0.1}}; got {type(sensor_faults).__name__}")
         env = SensorFaults(env, **dict(sensor_faults))
-        delay = int(sensor_faults.get("delay", 0) or 0)
-        if estimator is not None and delay and "delay" not in (estimator_kwargs or {}):
-            estimator_kwargs = {**dict(estimator_kwargs or {}), "delay": delay}
+        estimator_kwargs = with_known_delay(estimator, estimator_kwargs, sensor_faults)
     if estimator is None:
         if estimator_kwargs:
             raise ValueError("estimator_kwargs given without an estimator")

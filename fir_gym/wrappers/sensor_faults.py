@@ -27,6 +27,7 @@ are :mod:`.faulty_sensor`'s.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
@@ -38,6 +39,17 @@ from .faulty_sensor import FaultySensor, check_faults, fault_generator, flag_dic
 from .vector_estimator_observation import same_step_mode
 
 FloatArray = NDArray[np.float64]
+
+
+def with_known_delay(estimator: Any, estimator_kwargs: Mapping[str, Any] | None,
+                     sensor_faults: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The estimator's options with the sensor's ``delay`` told to it (a known delay), unless
+    the options set one themselves or there is no estimator."""
+    options = dict(estimator_kwargs or {})
+    delay = int((sensor_faults or {}).get("delay", 0) or 0)
+    if estimator is not None and delay and "delay" not in options:
+        options["delay"] = delay
+    return options
 
 
 def _plant_of(env: Any) -> Any:
@@ -61,10 +73,12 @@ def _sensor_setup(plant: Any, n_y: int) -> tuple[FloatArray, FloatArray]:
 
 
 def _episode_steps(env: Any, plant: Any) -> int | None:
+    """The episode's length: the shorter of the plant's horizon and the env's time limit
+    (``gym.make(id, max_episode_steps=N)`` sets only the latter)."""
     spec = getattr(env, "spec", None)
-    steps = getattr(plant, "max_episode_steps", None) or (spec.max_episode_steps if spec
-                                                           else None)
-    return None if steps is None else int(steps)
+    known = [int(n) for n in (getattr(plant, "max_episode_steps", None),
+                              getattr(spec, "max_episode_steps", None)) if n]
+    return min(known) if known else None
 
 
 class SensorFaults(gym.Wrapper, gym.utils.RecordConstructorArgs):
