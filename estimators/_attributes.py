@@ -4,8 +4,8 @@ Every public attribute either takes effect at the next step or refuses the assig
 with an error that says what to do (no silent traps): ``model`` on the Kalman family
 (``model_reassignable``; the filter rebuilds what it derived from it in
 ``_model_changed``), refused on the filters that precompute gains from it;
-``nan_policy``, ``nis_patience`` and ``max_covariance_trace`` validated and live (the
-latter two are the compiled watch's ``_limits``).
+``nan_policy``, ``nis_patience``, ``max_covariance_trace`` and ``gate`` validated and live
+(the last three are entries of the compiled steps' ``_limits``).
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
+import scipy.stats
 
-from ._validation import one_of, positive
+from ._validation import one_of, open_probability, positive
 from .model import StateSpaceModel
 
 __all__ = ["NAN_POLICIES", "LiveAttributes"]
@@ -29,9 +30,16 @@ class LiveAttributes:
     #: the model in :meth:`_model_changed`); otherwise assignment is refused
     model_reassignable: ClassVar[bool] = False
 
+    #: whether the step can reject a measurement by its NIS (``gate=``, the innovation gate)
+    can_gate: ClassVar[bool] = False
+    #: why a class that cannot gate refuses ``gate`` (its error message)
+    no_gate_reason: ClassVar[str] = "its step has no innovation gate"
+
     if TYPE_CHECKING:
         _limits: np.ndarray
         _nan_policy: str
+        _n_y: int
+        reports_nis: ClassVar[bool]
 
     @property
     def model(self) -> StateSpaceModel:
@@ -87,6 +95,38 @@ class LiveAttributes:
     @nis_patience.setter
     def nis_patience(self, value: int) -> None:
         self._limits[1] = float(positive("nis_patience", value, integer=True))
+
+    @property
+    def gate(self) -> float | None:
+        """The innovation gate: ``None`` (no gate) or a probability ``0 < gate < 1``
+        (assignable; docs/architecture.md#nonfinite-and-divergence).
+
+        A usable measurement whose normalised innovation squared exceeds
+        ``scipy.stats.chi2.ppf(gate, n_y)`` is treated as missing for its system (the
+        estimate, covariance and all other state end exactly as with that measurement
+        missing); ``last_info["nis"]`` still reports its NIS, and the divergence watch still
+        counts it. A class that cannot gate (``can_gate`` False) refuses any value but ``None``
+        with a ``ValueError``.
+        """
+        return self._gate
+
+    @gate.setter
+    def gate(self, value: float | None) -> None:
+        if value is None:
+            self._gate: float | None = None
+            self._gate_threshold: float | None = None
+            self._limits[4] = np.inf
+            return
+        gate = open_probability("gate", value)
+        if not self.can_gate:
+            reason = (self.no_gate_reason if self.reports_nis
+                      else "it computes no normalised innovation squared to gate on")
+            raise ValueError(f"gate: {type(self).__name__} cannot gate its measurements "
+                             f"({reason}); leave gate=None")
+        self._gate = gate
+        #: the NIS above which a measurement is rejected: χ²(n_y)'s ``gate`` quantile
+        self._gate_threshold = float(scipy.stats.chi2.ppf(gate, self._n_y))
+        self._limits[4] = self._gate_threshold
 
     @property
     def nan_policy(self) -> str:

@@ -181,5 +181,20 @@ def positive(name: str, value: Any, *, integer: bool = False) -> Any:
     return val
 
 
+def open_probability(name: str, value: Any) -> float:
+    """Check that ``value`` is a real number strictly between 0 and 1; returns it as a float.
+
+    A bool, a string or another non-number raises ``TypeError``; NaN, ``<= 0`` or ``>= 1``
+    raises ``ValueError`` (both naming ``name``)."""
+    if isinstance(value, _NOT_REAL) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a probability strictly between 0 and 1 (e.g. 0.999) "
+                        f"or None; got {value!r} ({type(value).__name__})")
+    val = float(value)
+    if not 0.0 < val < 1.0:                     # NaN fails too
+        raise ValueError(f"{name} must be a probability strictly between 0 and 1 (e.g. "
+                         f"0.999) or None; got {value!r}")
+    return val
+
+
 def _fmt(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"

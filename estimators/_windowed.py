@@ -41,12 +41,21 @@ class WindowedEstimator(Estimator):
     :func:`._consistency.innovation_nis` on numpy and its twin
     :func:`.compiled.watch.innovation_nis` on the compiled step.
 
+    **Innovation gate** (``gate=``, :class:`~.base.Estimator`). The NIS is known before the
+    pass, so a rejected measurement (NIS above the gate's threshold) enters the pass as a
+    missing one — ``valid &= ~gated``, its row of ``y`` zeroed as a masked entry's is — on
+    both paths: the windows, ages and every other state are exactly those of a step with
+    that measurement missing. The watch still books the rejected NIS. A system without a
+    NIS this step (NaN: no usable previous estimate, e.g. the FIR smoother's test over a
+    window with a gap) is not gated.
+
     Subclasses implement :meth:`_advance` and :meth:`_innovation_terms` and keep
     ``_age`` (samples in each window) and ``_last_xP``.
     """
 
     reports_nis: ClassVar[bool] = True
     has_compiled_step: ClassVar[bool] = True
+    can_gate: ClassVar[bool] = True
     _pending: np.ndarray | None = None
     _info: dict[str, Any]
     _age: np.ndarray
@@ -58,7 +67,7 @@ class WindowedEstimator(Estimator):
         self.max_estimate = positive("max_estimate", max_estimate)
         super().__init__(model, **options)
         #: the watch's limits with the growth bound (:mod:`.compiled.watch`)
-        self._limits = np.append(self._limits, self.max_estimate)
+        self._limits[3] = self.max_estimate
 
     @abstractmethod
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
@@ -105,10 +114,21 @@ class WindowedEstimator(Estimator):
                     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         nis = _consistency.innovation_nis(*self._nis_inputs(y, u, valid)) \
             if self.reports_nis else None
+        if nis is not None and self._gate_threshold is not None:
+            y, valid = self._gated_measurement(y, valid, nis)
         x, P, _ = self._advance(y, u, valid)
         if nis is not None:
             self._last_nis = nis
         return x, P, nis
+
+    def _gated_measurement(self, y: FloatArray, valid: np.ndarray, nis: FloatArray
+                           ) -> tuple[FloatArray, np.ndarray]:
+        """The gate (class docstring): ``y`` and ``valid`` for the pass, the measurements whose
+        NIS exceeds the threshold made missing (NaN NIS compares False: not gated)."""
+        rejected = nis > self._limits[4]
+        if not rejected.any():
+            return y, valid
+        return np.where(rejected[:, None], 0.0, y), valid & ~rejected
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
@@ -135,6 +155,8 @@ class WindowedEstimator(Estimator):
                 watch.innovation_nis(_batch(P_prev), _batch(A), _batch(Qx), _batch(H),
                                      _batch(R), _batch(e), predict, usable, nis)
                 self._last_nis = nis
+                if self._gate_threshold is not None:
+                    y, valid = self._gated_measurement(y, valid, nis)
             else:
                 nis, usable = self._nis, valid
             x, P, _ = self._advance(y, u, valid)

@@ -34,6 +34,18 @@ NaN NIS of a usable measurement counts as above). The flag is sticky until
 ``reset``. A system whose estimate became non-finite keeps its last finite
 estimate (and covariance), so NaN never reaches a caller.
 
+**Innovation gate.** ``gate=None`` (default) uses every usable measurement. ``gate=p``,
+a probability strictly between 0 and 1 (e.g. 0.999), rejects the measurement of a
+system whose normalised innovation squared — the number ``last_info["nis"]`` reports —
+exceeds ``scipy.stats.chi2.ppf(p, n_y)``: that system's estimate, covariance and every
+other state (windows, ages, regimes) end the step exactly as with that measurement
+missing, the other systems are unaffected. ``last_info["nis"]`` still reports the
+rejected NIS, the divergence watch counts it as it would an accepted one, and the step's
+log-likelihood is 0 there (as for a missing measurement). With a gate ``last_info`` adds
+``gated`` (this step's measurement was rejected: a bool or ``(B,)``) and ``gated_count``
+(rejections since ``reset``; ``restart`` zeroes the restarted systems'); without one the
+two keys are absent. A class that cannot gate (``can_gate`` False) refuses ``gate``.
+
 **One step, two implementations.** The hooks :meth:`_update` and :meth:`_predict_update`
 (returning new arrays) with :meth:`_accept` (the watch above) are the numpy reference.
 A class that sets ``has_compiled_step`` also implements :meth:`_compiled_update` and
@@ -91,7 +103,9 @@ class Estimator(LiveAttributes, ABC):
     ``P (B, n_x, n_x)``, ``y (B, n_y)``, ``u (B, n_u)`` and a boolean mask
     ``valid (B,)`` of systems whose measurement is usable. They return the new
     ``x``, ``P`` (``None`` for a filter without covariance, ``provides_covariance``
-    False) and the normalised innovation squared per system (or ``None``).
+    False) and the normalised innovation squared per system (or ``None``). A class
+    that sets ``can_gate`` treats a usable measurement whose returned NIS exceeds
+    ``_gate_threshold`` (when not ``None``) as missing, in both hooks and its twins.
     """
 
     #: short registry name (``"kf"``, ``"efir"``, ...)
@@ -131,6 +145,7 @@ class Estimator(LiveAttributes, ABC):
         max_covariance_trace: float = 1e12,
         nis_tail: float = 1e-9,
         nis_patience: int = 10,
+        gate: float | None = None,
     ) -> None:
         if not isinstance(model, StateSpaceModel):
             raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
@@ -143,9 +158,12 @@ class Estimator(LiveAttributes, ABC):
             raise ValueError(f"nis_tail must be in (0, 1); got {nis_tail!r}")
         patience = positive("nis_patience", nis_patience, integer=True)
         self._nis_threshold = float(scipy.stats.chi2.isf(tail, model.n_y))
-        #: the watch's limits as the compiled twins read them (:mod:`.compiled.watch`); the
-        #: properties ``nis_patience`` and ``max_covariance_trace`` read and write them
-        self._limits = np.array([self._nis_threshold, float(patience), max_trace])
+        #: the limits as the compiled twins read them (:mod:`.compiled.watch`): the watch's
+        #: three, the windowed filters' ``max_estimate`` and the gate's NIS threshold (inf:
+        #: none); the properties ``nis_patience``, ``max_covariance_trace`` and ``gate`` write them
+        self._limits = np.array([self._nis_threshold, float(patience), max_trace, np.inf,
+                                 np.inf])
+        self.gate = gate
         self.reset(x0, P0)
 
     # ------------------------------------------------------------------ public API
@@ -182,6 +200,8 @@ class Estimator(LiveAttributes, ABC):
         self._nis: FloatArray = np.zeros(0)
         self._logdet: FloatArray = np.zeros(0)
         self._fresh: np.ndarray = np.zeros(0, bool)
+        self._gated: np.ndarray = np.zeros(0, bool)
+        self._gated_count: np.ndarray = np.zeros(0, np.int64)
         self._k = 0
         #: whether the next step is an update only: the first after ``reset``, or one after
         #: ``predict`` (:mod:`.public_steps`)
@@ -226,6 +246,7 @@ class Estimator(LiveAttributes, ABC):
         self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
         self._diverged[mask] = False
         self._nis_run[mask] = 0
+        self._gated_count[mask] = 0
         self._fresh |= mask
         self._restarting = True
         self._restart_systems(mask)
@@ -253,6 +274,8 @@ class Estimator(LiveAttributes, ABC):
                 self._compiled_predict_update(Y, U, valid)
         else:
             self._numpy_step(Y, U, valid)
+        if self._gate_threshold is not None:
+            self._book_gate(valid)
         if self._restarting:
             self._fresh[:] = False
             self._restarting = False
@@ -318,9 +341,10 @@ class Estimator(LiveAttributes, ABC):
         a float or ``(B,)``, NaN where a measurement was skipped; ``None`` for filters
         without one), ``log_likelihood`` (the Gaussian log-density of the innovation,
         ``−½ (eᵀ S⁻¹ e + log det 2π S)``: pykalman's ``loglikelihood`` term; 0 where a
-        measurement was skipped, ``None`` for filters without an innovation covariance)
-        and the filter's own keys (e.g. the windowed filters' ``startup`` and
-        ``rank_deficient``).
+        measurement was skipped or rejected by the gate, ``None`` for filters without an
+        innovation covariance), with a gate ``gated`` and ``gated_count`` (module
+        docstring, *Innovation gate*), and the filter's own keys (e.g. the windowed
+        filters' ``startup`` and ``rank_deficient``).
         """
         if not self._n_b or self._k == 0:
             return {}
@@ -331,8 +355,23 @@ class Estimator(LiveAttributes, ABC):
         if self.reports_likelihood:
             lls = self._log_likelihoods()
             ll = float(lls[0]) if self._single else lls
-        return {"diverged": self.diverged, "nis": nis, "log_likelihood": ll,
+        info = {"diverged": self.diverged, "nis": nis, "log_likelihood": ll,
                 **self._step_info()}
+        if self._gate is not None:
+            info["gated"] = bool(self._gated[0]) if self._single else self._gated.copy()
+            info["gated_count"] = (int(self._gated_count[0]) if self._single
+                                   else self._gated_count.copy())
+        return info
+
+    def _book_gate(self, valid: np.ndarray) -> None:
+        """The gate's bookkeeping after a step: the systems whose usable measurement had a NIS
+        above the threshold — the ones the step rejected (every path decides on that very
+        comparison) — are counted, and their log-likelihood is 0."""
+        gated = valid & (self._nis > self._limits[4])
+        self._gated = gated
+        self._gated_count += gated
+        if gated.any():
+            self._last_valid = valid & ~gated
 
     def _log_likelihoods(self) -> FloatArray:
         """``(B,)`` Gaussian log-likelihood of the last innovation of every system: 0 where
@@ -552,6 +591,8 @@ class Estimator(LiveAttributes, ABC):
         #: ``log det S`` of each system's last innovation (NaN where none)
         self._logdet = np.full(n_batch, np.nan)
         self._fresh = np.zeros(n_batch, bool)
+        self._gated = np.zeros(n_batch, bool)
+        self._gated_count = np.zeros(n_batch, np.int64)
         self._all_valid = np.ones(n_batch, bool)
         self._last_valid = self._all_valid
         #: ``predict`` masks of the compiled twins: every system, none (the first step)

@@ -266,6 +266,14 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
     is :attr:`continuous_model`. ``last_info`` adds ``riccati_condition`` and
     ``riccati_breakdown`` (per system); its ``nis`` is a diagnostic: the interval
     average against its open-loop prediction, with variance ``H P(t_k) Hᵀ + R/h``.
+
+    The innovation gate (``gate=``, :class:`~fir_gym.estimators.base.Estimator`) decides on
+    that diagnostic, computed before the interval: a rejected measurement enters the interval
+    as a missing one (no measurement term in the Hamiltonian nor in the state's recursion).
+    Its variance leaves out the process noise inside the interval, so its law is χ²(n_y)
+    only approximately (well for ``h`` short against the dynamics): the rate of rejected
+    good measurements is about ``1 − gate``, not exactly. The first step gates the Kalman
+    update of the prior (its NIS is exact).
     """
 
     name = "bpf-kf"
@@ -323,6 +331,17 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
         b = cm.a(x, u) - (A @ x[:, :, None])[:, :, 0]             # input term (0 for u = 0)
         Hm = cm.H(x)
         d = cm.h(x) - (Hm @ x[:, :, None])[:, :, 0]               # 0 for a linear h
+        # innovation of the interval average against the open-loop prediction (diagnostic),
+        # before the interval: the gate decides on it which measurements enter
+        x_bar = np.linalg.solve(np.eye(cm.n_x) - 0.5 * h * A, (x + 0.5 * h * b)[:, :, None])
+        e = y - (Hm @ x_bar)[:, :, 0] - d
+        S = Hm @ P @ np.swapaxes(Hm, 1, 2) + cm.R / h
+        nis = np.einsum("bi,bi->b", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
+        nis = np.where(valid, nis, np.nan)
+        if self._gate_threshold is not None:                     # rejected: as if missing
+            rejected = nis > self._gate_threshold
+            if rejected.any():
+                y, valid = np.where(rejected[:, None], 0.0, y), valid & ~rejected
         HtRinv = np.swapaxes(Hm, 1, 2) @ cm.R_inv * valid[:, None, None]
         M = hamiltonian(A, HtRinv @ Hm, cm.GQGT)                  # eq 3.14
         step = bpf_riccati_step(P, M, h)
@@ -330,15 +349,10 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
             step = self._global(step, M, h)
         self._condition = step.condition
         K = step.P_bar @ HtRinv                                   # eqs 3.7, 3.28
-        # innovation of the interval average against the open-loop prediction (diagnostic)
-        x_bar = np.linalg.solve(np.eye(cm.n_x) - 0.5 * h * A, (x + 0.5 * h * b)[:, :, None])
-        e = y - (Hm @ x_bar)[:, :, 0] - d
-        S = Hm @ P @ np.swapaxes(Hm, 1, 2) + cm.R / h
-        nis = np.einsum("bi,bi->b", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
         x_next = bpf_state_step(x, A - K @ Hm, b + (K @ (y - d)[:, :, None])[:, :, 0], h)
         # P = V U⁻¹ is no Gram matrix: rebuilt from its semidefinite factor, it is symmetric
         # PSD by construction (docs/architecture.md#covariance-updates)
-        return x_next, psd_rebuild(step.P_next), np.where(valid, nis, np.nan)
+        return x_next, psd_rebuild(step.P_next), nis
 
     def _global(self, restarted: RiccatiStep, M: FloatArray, h: float) -> RiccatiStep:
         """The global recursion where it is still well conditioned; the restart elsewhere."""

@@ -142,6 +142,10 @@ class ContinuousDiscreteEKF(ContinuousEstimator):
 
     ``model`` (the attribute) is the sampled discrete view the base class reads;
     the continuous model is :attr:`continuous_model`.
+
+    The innovation gate (``gate=``, :class:`~fir_gym.estimators.base.Estimator`) acts on the
+    Kalman update that ends each interval (and on the first step's): a rejected measurement
+    leaves the propagated mean and covariance, as a missing one does.
     """
 
     name = "cd-ekf"
@@ -159,12 +163,14 @@ class ContinuousDiscreteEKF(ContinuousEstimator):
         R_bar = cm.R / cm.dt
         if self.measurement == "end":
             x, P = cd_ekf_propagate(cm, x, P, u, substeps=self.substeps)
-            x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), R_bar, valid)
+            x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), R_bar, valid,
+                                         self._gate_threshold)
             return x, P, nis
         n = cm.n_x
         z, S = cd_ekf_propagate(cm, x, P, u, substeps=self.substeps, average=True)
         H_s = np.concatenate([np.zeros((cm.n_y, n)), np.eye(cm.n_y)], axis=1)   # ȳ = s + v̄
-        z, S, _, nis = update_kernel(z, S, y - z[:, n:], H_s, R_bar, valid)
+        z, S, _, nis = update_kernel(z, S, y - z[:, n:], H_s, R_bar, valid,
+                                     self._gate_threshold)
         return z[:, :n], S[:, :n, :n], nis
 
 

@@ -25,6 +25,7 @@ class ContinuousEstimator(Estimator):
     """An :class:`Estimator` on a :class:`ContinuousModel` (see the module docstring)."""
 
     model_attribute: ClassVar[str] = "continuous_model"
+    can_gate: ClassVar[bool] = True
 
     def __init__(self, model: ContinuousModel, *, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, **options: Any) -> None:
@@ -37,5 +38,6 @@ class ContinuousEstimator(Estimator):
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
         cm = self.continuous_model
-        x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), cm.R / cm.dt, valid)
+        x, P, _, nis = update_kernel(x, P, y - cm.h(x), cm.H(x), cm.R / cm.dt, valid,
+                                     self._gate_threshold)
         return x, P, nis

@@ -81,6 +81,7 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
 
     name = "ekf"
     has_compiled_step = True
+    can_gate = True
     reports_likelihood = True
     model_reassignable = True
 
@@ -142,7 +143,8 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         """The Joseph-form update of the prior ``(x, P)``: ``(x⁺, P⁺, nis, log det S)``."""
         hx = self._h(x)
         e = y - hx if self._residual_y is None else self._residual_y(y, hx)
-        x, P, W, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid)
+        x, P, W, nis = update_kernel(x, P, e, self._H(x), self.model.R, valid,
+                                     self._gate_threshold)
         return x, P, nis, logdet_of_inverse(W, x.shape[0])
 
     # ------------------------------------------------------------------ smoother

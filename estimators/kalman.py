@@ -118,21 +118,40 @@ def correct(x: FloatArray, e: FloatArray, K: FloatArray, W: FloatArray
 
 
 def update_kernel(x: FloatArray, P: FloatArray, e: FloatArray, H: FloatArray, R: FloatArray,
-                  valid: np.ndarray | None = None
+                  valid: np.ndarray | None = None, gate: float | None = None
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Batched Joseph-form update given the innovation ``e``; returns ``x⁺, P⁺, S⁻¹, nis``.
 
     ``H`` is ``(m, n)`` or ``(B, m, n)``; ``R`` is ``(m, m)`` or ``(B, m, m)``.
     A system whose ``S`` is not positive definite gets NaN (its caller flags it).
-    Systems with ``valid`` False keep ``x, P`` (their ``nis`` is NaN).
+    Systems with ``valid`` False keep ``x, P`` (their ``nis`` is NaN); so do, with a
+    ``gate`` (a NIS threshold, the innovation gate's), those whose NIS exceeds it (their
+    ``nis`` is kept).
     """
     K, W, P_new = gain_kernel(P, constant_or_batch(H), constant_or_batch(R))
     x_new, nis = correct(x, e, K, W)
-    if valid is not None and not valid.all():
-        x_new = np.where(valid[:, None], x_new, x)
-        P_new = np.where(valid[:, None, None], P_new, P)
-        nis = np.where(valid, nis, np.nan)
+    x_new, P_new, nis = keep_usable(x_new, P_new, nis, x, P, valid, gate)
     return x_new, P_new, W, nis
+
+
+def keep_usable(x_new: FloatArray, P_new: FloatArray, nis: FloatArray, x: FloatArray,
+                P: FloatArray, valid: np.ndarray | None, gate: float | None
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The update where its measurement counts: a system without a usable measurement
+    (``valid`` False) keeps its prior ``x, P`` and gets a NaN NIS; with ``gate``, one whose
+    NIS exceeds it (the innovation gate; NaN compares False) keeps ``x, P`` too, exactly as
+    if its measurement were missing, and its NIS."""
+    keep = valid
+    if gate is not None:
+        rejected = nis > gate
+        if rejected.any():
+            keep = ~rejected if valid is None else valid & ~rejected
+    if keep is not None and not keep.all():
+        x_new = np.where(keep[:, None], x_new, x)
+        P_new = np.where(keep[:, None, None], P_new, P)
+    if valid is not None and not valid.all():
+        nis = np.where(valid, nis, np.nan)
+    return x_new, P_new, nis
 
 
 # ---------------------------------------------------------------------------- pure functions
@@ -252,12 +271,26 @@ class KalmanFilter(PublicSteps, Estimator):
       relative). A skipped measurement, a repaired (non-finite) estimate, a restart
       or ``reset`` leaves that regime.
 
+    **The innovation gate** (``gate=``, :class:`~fir_gym.estimators.base.Estimator`) keeps
+    both shortcuts while it rejects nothing. A rejected measurement gives its system
+    ``x⁻, P⁻`` — its own covariance, which neither shortcut can hold — so a step in which the
+    gate fires under a shortcut is computed again without it, as a step with a missing
+    measurement is: first out of the steady state (the full recursion, on a shared ``P``
+    still), then, if the gate fires there too, with a covariance per system; the gate decides
+    on the pass that is kept (whose NIS ``last_info`` reports). The step then ends exactly
+    as the same step with the rejected measurements missing would, and it leaves both
+    shortcuts as that step does. A step costs twice or three times its usual cost only when
+    the gate fires; giving up the shortcuts for a gated filter would cost a batch its shared
+    covariance on every step.
+
     The compiled twin (:func:`~.compiled.kalman.linear_step`) does the same step, both
-    shortcuts included, in one call.
+    shortcuts and the gate included (it hands back, writing nothing, when the gate fires
+    under a shortcut).
     """
 
     name = "kf"
     has_compiled_step = True
+    can_gate = True
     reports_likelihood = True
     model_reassignable = True
     per_call_H = "C"
@@ -322,14 +355,17 @@ class KalmanFilter(PublicSteps, Estimator):
         gains = self._gains
         if gains.regime[0] and every:                  # steady state: P, K, S⁻¹ kept
             K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
-            x, nis = correct(x, y - x @ self._mats.C.T, K, W)
-            gains.regime[0] = int(bool(np.isfinite(x).all()))
-            return x, P, nis, logdet_of_inverse(W, x.shape[0])
+            x_new, nis = correct(x, y - x @ self._mats.C.T, K, W)
+            if not _fires(nis, self._gate_threshold):
+                gains.regime[0] = int(bool(np.isfinite(x_new).all()))
+                return x_new, P, nis, logdet_of_inverse(W, x.shape[0])
+            # the gate rejects a measurement: its system needs its own P⁻, which the steady
+            # state does not hold — the step again in full (class docstring)
         gains.regime[0] = 0
         mats = self._matrices(self._k)
         x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
                                                 mats)
-        if (gains.regime[1] and every and _converged(P_new, P)
+        if (gains.regime[1] and every and K is not None and _converged(P_new, P)
                 and np.isfinite(x_new).all() and np.isfinite(P_new).all()):
             gains.regime[0] = 1
             gains.K = np.ascontiguousarray(K.transpose(1, 2, 0))
@@ -339,17 +375,20 @@ class KalmanFilter(PublicSteps, Estimator):
     def _correct(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray,
                  mats: StepMatrices) -> tuple[Any, ...]:
         """The update ``(x⁺, P⁺, nis, K, S⁻¹)``; a shared ``P`` is split where some system has
-        no usable measurement (``K`` is then not returned)."""
+        no usable measurement or the gate rejects one (``K`` is then not returned)."""
         C, R = mats.C, mats.R
         e = y - x @ C.T
-        if valid is not self._all_valid:
-            if P.shape[0] != x.shape[0]:
-                P = np.repeat(P, x.shape[0], axis=0)
-            x_new, P_new, W, nis = update_kernel(x, P, e, C, R, valid)
-            return x_new, P_new, nis, None, W
-        K, W, P_new = gain_kernel(P, C, R)
-        x_new, nis = correct(x, e, K, W)
-        return x_new, P_new, nis, K, W
+        gate = self._gate_threshold
+        if valid is self._all_valid:
+            K, W, P_new = gain_kernel(P, C, R)
+            x_new, nis = correct(x, e, K, W)
+            if not _fires(nis, gate):
+                return x_new, P_new, nis, K, W
+            # a rejected measurement: the update again as with it missing (a P per system)
+        if P.shape[0] != x.shape[0]:
+            P = np.repeat(P, x.shape[0], axis=0)
+        x_new, P_new, W, nis = update_kernel(x, P, e, C, R, valid, gate)
+        return x_new, P_new, nis, None, W
 
     # ------------------------------------------------------------------ smoother
     def smooth(self, ys: ArrayLike, us: ArrayLike | None = None) -> SmootherResult:
@@ -382,7 +421,9 @@ class LinearGains:
     :func:`~.compiled.kalman.linear_step` on the filter's state, with ``K`` and ``S⁻¹`` of
     each row of ``P`` held as blocks (``K (n, m, rows)``, ``W (m, m, rows)``) and the
     ``regime`` ``[steady now, may settle]`` (a time-invariant model's KF may settle).
-    A missing measurement gives every system its own covariance and leaves the regime.
+    A missing measurement gives every system its own covariance and leaves the regime;
+    so does a measurement the gate rejects (the kernel hands back when it would under a
+    shortcut, and the step runs again without it: :class:`KalmanFilter`).
     """
 
     def __init__(self, n: int, m: int, may_settle: bool) -> None:
@@ -398,14 +439,23 @@ class LinearGains:
             self.regime[0] = 0
             if P.shape[0] < x.shape[0]:
                 P = flt._P = np.repeat(P, x.shape[0], axis=0)
-        if self.K.shape[2] != P.shape[0]:
-            self.regime[0] = 0
-            self.K = np.zeros(self.K.shape[:2] + P.shape[:1])
-            self.W = np.zeros(self.W.shape[:2] + P.shape[:1])
-        compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
-                                    prediction.Qd, update.R, y, valid, flt._predicting(),
-                                    self.K, self.W, self.regime, flt._diverged, flt._nis_run,
-                                    flt._nis, flt._limits, flt._logdet)
+        while True:
+            if self.K.shape[2] != P.shape[0]:
+                self.regime[0] = 0
+                self.K = np.zeros(self.K.shape[:2] + P.shape[:1])
+                self.W = np.zeros(self.W.shape[:2] + P.shape[:1])
+            if compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
+                                           prediction.Qd, update.R, y, valid,
+                                           flt._predicting(), self.K, self.W, self.regime,
+                                           flt._diverged, flt._nis_run, flt._nis, flt._limits,
+                                           flt._logdet):
+                return
+            # the gate fired under a shortcut and nothing was written: the step again without
+            # it, in the numpy reference's order (out of the steady state, then a P per system)
+            if self.regime[0]:
+                self.regime[0] = 0
+            else:
+                P = flt._P = np.repeat(P, x.shape[0], axis=0)
 
 
 class _Scheduled(Protocol):
@@ -422,6 +472,12 @@ class StepMatrices(NamedTuple):
     C: FloatArray
     Qd: FloatArray
     R: FloatArray
+
+
+def _fires(nis: FloatArray, gate: float | None) -> bool:
+    """Whether the innovation gate (a NIS threshold, ``None``: none) rejects some system's
+    measurement (NaN compares False)."""
+    return gate is not None and bool((nis > gate).any())
 
 
 def _converged(P_new: FloatArray, P: FloatArray) -> bool:

@@ -39,6 +39,7 @@ class LinearizedKalmanFilter(PublicSteps, Estimator):
 
     name = "lkf"
     has_compiled_step = True
+    can_gate = True
     reports_likelihood = True
     model_reassignable = True
 
@@ -78,7 +79,7 @@ class LinearizedKalmanFilter(PublicSteps, Estimator):
         x_nom = self._x_nom if x_nom is None else x_nom
         H = self.model.H(x_nom)
         e = y - self.model.h(x_nom) - (H @ dx[:, :, None])[:, :, 0]
-        dx, P, W, nis = update_kernel(dx, P, e, H, self.model.R, valid)
+        dx, P, W, nis = update_kernel(dx, P, e, H, self.model.R, valid, self._gate_threshold)
         return x_nom + dx, P, nis, logdet_of_inverse(W, dx.shape[0])
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:

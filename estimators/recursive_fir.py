@@ -69,11 +69,16 @@ class RecursiveFIRFilter(FIRFilter):
     estimate ``s``; ``last_info["reinitialised"]`` says whether this step used the
     direct form (per system: a restarted system re-initialises when its window
     fills). ``nan_policy="skip"`` is not supported (the recursion needs every
-    measurement). ``P`` is the direct filter's error covariance.
+    measurement). ``P`` is the direct filter's error covariance. For the same reason it
+    refuses ``gate`` (the innovation gate treats a rejected measurement as missing): use
+    :class:`FIRFilter`, whose estimate it equals, to gate.
     """
 
     name: ClassVar[str] = "rfir"
     _extra_slots: ClassVar[int] = 1
+    can_gate: ClassVar[bool] = False
+    no_gate_reason: ClassVar[str] = ("the recursion needs every measurement, and a rejected "
+                                     "one would be a missing one; FIRFilter gates")
 
     def __init__(self, model: StateSpaceModel, *, horizon: int, prior: str | None = None,
                  reinit_every: int | str | None = "auto", gain: str = "two-stage",

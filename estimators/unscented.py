@@ -49,6 +49,7 @@ from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
 from .extended import model_callables
+from .kalman import keep_usable
 from .model import StateSpaceModel
 from .public_steps import PublicSteps
 from .registry import register_estimator
@@ -271,6 +272,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
 
     name = "ukf"
     has_compiled_step = True
+    can_gate = True
     reports_likelihood = True
     model_reassignable = True
     twin_replaces = (*Estimator.twin_replaces, "_draw", "_correct")
@@ -381,10 +383,8 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         x_new = x + (K @ e[:, :, None])[:, :, 0]
         P_new = psd_rebuild(symmetrize(P - K @ Pxz.mT))       # PSD by construction
         nis = ((W @ e[:, :, None])[:, :, 0] * e).sum(axis=1)
-        if not valid.all():
-            x_new = np.where(valid[:, None], x_new, x)
-            P_new = np.where(valid[:, None, None], P_new, P)
-            nis = np.where(valid, nis, np.nan)
+        # a missing measurement, or one the gate rejects: x⁻, P⁻ kept
+        x_new, P_new, nis = keep_usable(x_new, P_new, nis, x, P, valid, self._gate_threshold)
         return x_new, P_new, nis, logdet_of_inverse(W, n_b)
 
 

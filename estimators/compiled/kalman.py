@@ -11,7 +11,10 @@ booked by :func:`.watch.verdict`. The numpy references' rules hold: a system who
 ``S`` is not positive definite gets NaN (so the watch keeps its last estimate and flags
 it), a system without a usable measurement (``valid`` False) keeps ``x⁻, P⁻`` with a NaN
 NIS, a system whose ``predict`` is False takes no prediction (the first step after a
-(re)start: an update of its prior).
+(re)start: an update of its prior). The innovation gate: with a fifth entry of ``limits``
+(the NIS threshold; ``inf`` or absent: no gate), a usable measurement whose NIS exceeds it
+is treated as missing — the system keeps ``x⁻, P⁻`` — while its NIS is still stored and
+booked by the watch (:func:`~fir_gym.estimators.kalman.keep_usable`, the reference).
 
 Two entry points, built from the same block pieces (:func:`predict_block`,
 :func:`gain_block`, :func:`finish`):
@@ -108,15 +111,18 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
     finite. Column ``t`` of the blocks ``Xm (n, ·)`` (``x⁻``) and ``E (m, ·)`` (innovations)
     belongs to system ``b0 + t``; of ``ok``, ``K``, ``W``, ``Pm``, ``Pp`` column ``c0 + t`` (``0``
     for all where ``shared``). ``logdet[b]`` receives ``log det S`` (NaN without a usable
-    measurement), for the innovation's log-likelihood. Returns whether every estimate was
-    stored."""
+    measurement), for the innovation's log-likelihood. A NIS above the gate's threshold
+    (``limits[4]``, module docstring) keeps ``x⁻, P⁻`` as a missing measurement does; the watch
+    books it all the same. Returns whether every estimate was stored."""
     n, m = Xm.shape[0], E.shape[0]
     nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
+    gate_limit = limits[4] if limits.shape[0] > 4 else np.inf
     xn = np.empty(n)
     every = True
     for t in range(nb):
         b, col = b0 + t, 0 if shared else c0 + t
         usable = valid[b]                            # no measurement: keep x⁻, P⁻
+        update = usable                              # ... nor a rejected one
         q = np.nan
         logdet[b] = logdet_of_inverse(W, col) if usable and ok[col] else np.nan
         for i in range(n):
@@ -126,20 +132,23 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
             for i in range(m):
                 for k in range(m):
                     q += E[i, t] * W[i, k, col] * E[k, t]
-            for i in range(n):                       # x⁺ = x⁻ + K e
-                v = 0.0
-                for k in range(m):
-                    v += K[i, k, col] * E[k, t]
-                xn[i] += v
+            if q > gate_limit:                       # the gate: as if missing
+                update = False
+            else:
+                for i in range(n):                   # x⁺ = x⁻ + K e
+                    v = 0.0
+                    for k in range(m):
+                        v += K[i, k, col] * E[k, t]
+                    xn[i] += v
         elif usable:                                 # S not positive definite
             xn[0] = np.nan
         finite = True
         trace = 0.0
         for i in range(n):
-            trace += Pp[i, i, col] if usable else Pm[i, i, col]
+            trace += Pp[i, i, col] if update else Pm[i, i, col]
             finite = finite and np.isfinite(xn[i])
             for j in range(n):
-                finite = finite and np.isfinite(Pp[i, j, col] if usable else Pm[i, j, col])
+                finite = finite and np.isfinite(Pp[i, j, col] if update else Pm[i, j, col])
         nis_run[b], blown = verdict(finite, trace, q, usable, True, nis_run[b], nis_limit,
                                     patience, max_trace)
         if blown:
@@ -149,7 +158,7 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
                 x[b, i] = xn[i]
                 if store_P:
                     for j in range(n):
-                        P[b, i, j] = Pp[i, j, col] if usable else Pm[i, j, col]
+                        P[b, i, j] = Pp[i, j, col] if update else Pm[i, j, col]
         nis[b] = q
         every = every and finite
     return every
@@ -205,9 +214,13 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                 valid: np.ndarray, predict: np.ndarray, gain_K: np.ndarray,
                 gain_W: np.ndarray, regime: np.ndarray, diverged: np.ndarray,
                 nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray, logdet: np.ndarray
-                ) -> None:
+                ) -> bool:
     """One step of a linear model's filter, in place: ``x⁻ = A x + B u`` (``u (B | 1, n_u)``)
     and ``P⁻ = A P Aᵀ + Q`` where ``predict``, the update with ``e = y − C x⁻``, the watch.
+    Returns True; False when the gate (``limits[4]``) rejects a measurement while ``P`` is
+    shared or steady — shortcuts that cannot hold that system's own ``P⁻`` — and then nothing
+    of the state (``x``, ``P``, ``regime``, the watch's arrays) has been written: the caller
+    leaves the shortcut and calls again (:class:`~fir_gym.estimators.kalman.LinearGains`).
 
     ``P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system (every
     measurement must then be usable and ``predict`` the same for all). ``gain_K (n, m,
@@ -263,6 +276,7 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                         scale = max(scale, abs(P[r, i, j]))
                         change = max(change, abs(U[i, j, t] - P[r, i, j]))
     shared = n_p < n_b
+    gate_limit = limits[4] if limits.shape[0] > 4 else np.inf
     Xm, E = np.empty((n, n_b)), np.empty((m, n_b))
     settling = regime[1] == 1
     # the state half: x⁻ and e of every system, then one finish call (a call per block of
@@ -285,9 +299,22 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
             for k in range(n):
                 v += C[i, k] * Xm[k, b]
             E[i, b] = y[b, i] - v
+    if (shared or steady) and gate_limit < np.inf:   # would the gate reject? (as finish)
+        for b in range(n_b):
+            col = 0 if shared else b
+            if valid[b] and ok_all[col]:
+                q = 0.0
+                for i in range(m):
+                    for k in range(m):
+                        q += E[i, b] * gain_W[i, k, col] * E[k, b]
+                if q > gate_limit:
+                    return False
     repaired = not finish(0, n_b, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, 0,
                           shared, not (shared or steady), x, P, diverged, nis_run, nis, limits,
                           logdet)
+    if settling and gate_limit < np.inf:             # a rejected measurement: as if missing
+        for b in range(n_b):
+            settling = settling and not nis[b] > gate_limit
     if shared and not steady:                        # one covariance, stored where finite
         finite = ok_all[0]
         for i in range(n):
@@ -301,3 +328,4 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
         regime[0] = 0 if repaired else 1
     else:
         regime[0] = 1 if settling and not repaired and change <= 4.0 * EPS * scale else 0
+    return True
