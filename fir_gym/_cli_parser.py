@@ -232,6 +232,34 @@ def build_parser() -> argparse.ArgumentParser:
     _add_runner_options(p, "(plant, kind, seed) jobs")
     p.set_defaults(func=commands.cmd_benchmark)
 
+    p = command("benchmark-robustness",
+                "which estimator belongs in a closed loop when the model is wrong and the "
+                "sensor misbehaves: every plant x condition x controller",
+                description="The robustness benchmark (docs/robustness.md): the LQG on every "
+                            "applicable estimator (plain and gated) and on the true state, "
+                            "then PPO on true states, measurements, memories and estimates "
+                            "trained on the nominal plant and with a condition on, each under "
+                            "every condition and strength. The LQG grid needs the base "
+                            "install; the learned grid the rl extra: " + rl)
+    p.add_argument("--quick", action="store_true",
+                   help="two plants, the middle strength, tiny budgets: checks the pipeline "
+                        "in a few minutes (its numbers mean nothing)")
+    p.add_argument("--out", default="robustness", help="output folder")
+    p.add_argument("--plants", default=None,
+                   help="comma-separated environment ids (default: all five)")
+    p.add_argument("--conditions", default=None,
+                   help="comma-separated conditions (default: all; see fir-gym list); "
+                        "nominal is always run")
+    p.add_argument("--seeds", type=positive_int, default=None,
+                   help="seeds per learned kind and regime (default: 3; 1 with --quick)")
+    p.add_argument("--lqg-only", action="store_true",
+                   help="run the LQG grid only (no training; needs no extra)")
+    p.add_argument("--report-only", action="store_true",
+                   help="rebuild OUT/REPORT.md and the figures from OUT/results.json")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_runner_options(p, "tasks")
+    p.set_defaults(func=commands.cmd_robustness)
+
     p = command("watch", "record one episode as a GIF or MP4, the estimate drawn over the plant",
                 description="Record one episode with the estimate (and its 2σ region) and "
                             "the measurement drawn over every frame. Needs the video extra: "

@@ -252,6 +252,37 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_robustness(args: argparse.Namespace) -> int:
+    from .robustness.benchmark import run_benchmark
+    from .robustness.plan import check_selection
+    from .robustness.report import rebuild
+
+    out = Path(args.out)
+    if args.report_only:
+        report = rebuild(out)
+        print(f"rebuilt {out / 'REPORT.md'} from {out / 'results.json'} "
+              f"({len(report['tables'])} cells)")
+        return 0
+    plants = [p.strip() for p in args.plants.split(",") if p.strip()] if args.plants else None
+    conditions = ([c.strip() for c in args.conditions.split(",") if c.strip()]
+                  if args.conditions else None)
+    check_selection(plants, conditions)              # a bad name fails before any work
+    if not args.lqg_only:
+        from ._extras import require
+
+        require("stable_baselines3", "sb3_contrib")
+    with _runner(args) as runner:
+        report = run_benchmark(out, quick=args.quick, runner=runner, plants=plants,
+                               conditions=conditions, seeds=args.seeds,
+                               learned=not args.lqg_only)
+    for answer in report["answers"]:
+        print("-", answer)
+    print(f"\nLQG grid: {report['lqg_tasks']} tasks in {report['lqg_seconds']:.0f} s; learned "
+          f"grid: {report['learned_tasks']} tasks in {report['learned_seconds']:.0f} s")
+    print(f"wrote {out / 'REPORT.md'}, {out / 'results.json'} and {out / 'figures'}")
+    return 0
+
+
 def cmd_watch(args: argparse.Namespace) -> int:
     from .video import watch
 

@@ -52,3 +52,18 @@ def install_hint(module: str | None) -> str | None:
         return None
     package, extra = MODULES[top]
     return f"{package} is missing (the {extra} extra): {INSTALL[extra]}"
+
+
+def require(*modules: str) -> None:
+    """Import each module now, so that a missing extra is one clear error before any work
+    (:func:`install_hint`'s message) instead of a failure hours into a run."""
+    import importlib
+
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as err:
+            hint = install_hint(err.name or module)
+            if hint is None:
+                raise
+            raise MissingExtra(hint) from None

@@ -7,7 +7,10 @@ filter, a wrapper, the training recipe — invalidates every result computed bef
 version is the SHA-256 of every source and data file of the installed package
 (``fir_gym``, ``fir_gym.envs``, ``fir_gym.estimators`` and their sub-packages: ``.py``,
 ``.yml``, ``.xml``), path by path in sorted order, and the package's version string;
-documentation, tests and scripts are not part of it. It is computed once per process.
+documentation, tests and scripts are not part of it, nor are the modules that only
+present finished results or run other commands (:data:`PRESENTATION`: the report, the
+tables, the figures, the command line, the paper scenarios, the speed benchmarks), which
+cannot change a job's numbers. It is computed once per process.
 """
 
 from __future__ import annotations
@@ -18,6 +21,11 @@ from pathlib import Path
 
 #: the files that make up the code
 SUFFIXES = (".py", ".yml", ".yaml", ".xml")
+#: files and folders of ``fir_gym`` that only present results or run other commands
+PRESENTATION = ("_cli_parser.py", "_commands.py", "_extras.py", "cli.py", "tables.py",
+                "video.py", "benchmarks", "plotting", "scenarios", "robustness/benchmark.py",
+                "robustness/report.py", "robustness/tables.py", "robustness/answers.py",
+                "training/benchmark.py", "training/curves.py")
 
 
 @functools.cache
@@ -37,8 +45,11 @@ def code_version() -> str:
                 if (path.suffix not in SUFFIXES or "__pycache__" in relative.parts
                         or not path.is_file()):
                     continue
-                if package == "fir_gym" and relative.parts[0] in ("envs", "estimators"):
-                    continue                      # hashed as their own packages
+                if package == "fir_gym" and (
+                        relative.parts[0] in ("envs", "estimators")   # their own packages
+                        or relative.parts[0] in PRESENTATION
+                        or relative.as_posix() in PRESENTATION):
+                    continue
                 digest.update(f"{package}/{relative.as_posix()}\0".encode())
                 digest.update(path.read_bytes())
                 digest.update(b"\0")
