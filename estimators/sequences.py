@@ -13,7 +13,8 @@ a fresh run.
 
 **Missing measurements**: NaN entries and the masked entries of a ``numpy.ma`` array,
 whatever ``nan_policy`` says; a system with any missing entry at step ``k`` predicts only
-(its ``log_likelihoods`` term is 0, its ``nis`` NaN).
+(its ``log_likelihoods`` term is 0, its ``nis`` NaN). A measurement the innovation gate
+rejects (``gate=``) is treated as missing too, with its ``nis`` kept and ``gated`` True.
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ class FilterResult:
         nis: normalised innovation squared ``(T,)`` / ``(T, B)`` (NaN where missing);
             ``None`` for a filter without one.
         diverged: the sticky divergence flag after each step, ``(T,)`` / ``(T, B)``.
+        gated: whether the innovation gate rejected each step's measurement, ``(T,)`` /
+            ``(T, B)``; ``None`` for a filter without a gate (``gate=None``).
     """
 
     x: FloatArray
@@ -57,6 +60,7 @@ class FilterResult:
     log_likelihood: Any
     nis: FloatArray | None
     diverged: np.ndarray
+    gated: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -131,6 +135,7 @@ def filter_sequence(est: Estimator, ys: ArrayLike, us: ArrayLike | None = None
     lls: list[Any] = []
     nis: list[Any] = []
     div: list[Any] = []
+    gated: list[Any] = []
     gaps = np.isnan(np.ma.filled(Y, np.nan)).reshape(T, -1).any(axis=1)
     for k in range(T):
         y = Y[k] if gaps[k] else Y.data[k]
@@ -141,10 +146,12 @@ def filter_sequence(est: Estimator, ys: ArrayLike, us: ArrayLike | None = None
         lls.append(info.get("log_likelihood"))
         nis.append(info.get("nis"))
         div.append(info["diverged"])
+        gated.append(info.get("gated"))
     x = np.stack(xs)
     lh = None if lls[0] is None else np.asarray(lls, dtype=np.float64)
     total = None if lh is None else (float(lh.sum()) if lh.ndim == 1 else lh.sum(axis=0))
     return FilterResult(
         x=x, P=None if Ps[0] is None else np.stack(Ps), log_likelihoods=lh,
         log_likelihood=total, nis=None if nis[0] is None else np.asarray(nis, np.float64),
-        diverged=np.asarray(div, dtype=bool))
+        diverged=np.asarray(div, dtype=bool),
+        gated=None if gated[0] is None else np.asarray(gated, dtype=bool))
