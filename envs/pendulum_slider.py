@@ -13,7 +13,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
-from ._base import PlantEnv, psd_sqrt, saturated_cost
+from ._base import PlantEnv, psd_sqrt, saturated_cost, state_failure
+from ._conditions import per_system
 from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
 from ._overlay import CameraView
 from .pendulum_slider_dynamics import (
@@ -28,6 +29,16 @@ PAPER_R_STD = (0.003, 0.03, 0.03, 0.3)
 #: contact settings of the "coulomb" mode: stiff enough that the stick band does not creep
 RAIL_SOLREF = (0.002, 1.0)
 RAIL_SOLIMP = (0.99, 0.9999, 0.0001, 0.5, 2.0)
+
+
+def refuse_batch(friction: Any) -> None:
+    """Refuse, in one line, an option the native vector env's analytic equations cannot
+    reproduce: ``friction="coulomb"`` is MuJoCo's rail contact, not an ODE."""
+    if friction == "coulomb":
+        raise ValueError("friction='coulomb' is MuJoCo's rail contact, which the native vector "
+                         "env of PendulumSlider-v0 (the analytic equations of motion) cannot "
+                         "reproduce; use friction='paper' or 'none', or single MuJoCo envs "
+                         "(gym.make_vec(..., vectorization_mode='sync'))")
 
 
 class PaperFrictionForce:
@@ -194,8 +205,8 @@ class PendulumSliderEnv(PlantEnv):
 
     ``gym.make("fir_gym/PendulumSlider-v0", friction="paper", dynamics="physical", frame_skip=1,
     force_max=10.0, R=diag(PAPER_R_STD²), Q=None, nominal=None, initial_state=None,
-    initial_state_cov=None, max_episode_steps=5000, render_mode=None, width=480,
-    height=360, **params)``,
+    initial_state_cov=None, max_episode_steps=5000, randomize=None, burst=None,
+    render_mode=None, width=480, height=360, **params)``,
     ``params`` among ``m1, m2, l, I_c, k, l0, M0, mu, g``. ``frame_skip`` MuJoCo
     steps of 1 ms make one env step. ``Q`` is the true process noise added to the
     state after each env step (none by default: MuJoCo is deterministic); the
@@ -203,6 +214,18 @@ class PendulumSliderEnv(PlantEnv):
     ``nominal`` may change any physical parameter, ``R``, ``Q``, ``friction`` or
     ``dynamics`` for the model, a :class:`~fir_gym.estimators.augment.ParametricModel` whose
     parameters ``[μ, M0]`` can be estimated jointly with the state.
+    ``randomize`` draws the true ``mu`` and ``M0`` (the two parameters paper 003
+    identifies) and ``force_max`` (the motor's gain) around the nominal ones every episode
+    (the simulation's hinge damping, friction law and force scale follow the draw; the
+    reward's ``x_rest`` and the starting state stay the constructor's: the task does not
+    move with the draw); ``burst`` stretches the increments over a window of steps and
+    puts the stretched state back into MuJoCo, where the next step starts
+    (docs/robustness.md#plant-conditions).
+
+    ``gym.make_vec("fir_gym/PendulumSlider-v0", n, vectorization_mode="vector_entry_point")``
+    steps ``n`` systems at once by the RK4 of the equations above (the physical ones equal
+    MuJoCo's step to round-off), the conditions per system; it refuses
+    ``friction="coulomb"``, MuJoCo's rail contact (docs/envs/pendulum-slider.md#vector-env).
 
     ## Version History
 
@@ -223,6 +246,8 @@ class PendulumSliderEnv(PlantEnv):
     default_max_episode_steps: ClassVar[int] = 5000
     #: the cap of the bracketed cost (before the Δt / 0.01 scaling)
     BRACKET_CAP: ClassVar[float] = 20.0
+    #: the rail friction μ and hinge damping M0 (what paper 003 identifies), the motor's gain
+    randomizable: ClassVar[tuple[str, ...]] = ("mu", "M0", "force_max")
 
     def __init__(
         self,
@@ -237,6 +262,8 @@ class PendulumSliderEnv(PlantEnv):
         initial_state: ArrayLike | None = None,
         initial_state_cov: ArrayLike | None = "swing",
         max_episode_steps: int | None = None,
+        randomize: Mapping[str, float] | None = None,
+        burst: Any = None,
         render_mode: str | None = None,
         width: int = 480,
         height: int = 360,
@@ -279,16 +306,23 @@ class PendulumSliderEnv(PlantEnv):
                          default_nominal={"Q": np.full(4, 1e-6)},
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"], render_mode=render_mode,
-                         max_episode_steps=max_episode_steps)
+                         max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
         self._reward_scale = self.params["frame_skip"] * 0.1
         self.cost_cap = self.BRACKET_CAP * self._reward_scale
         self.width, self.height = positive("width", width, integer=True), \
             positive("height", height, integer=True)
         self._process_sqrt = psd_sqrt(self.params["Q"])
         self._has_process_noise = bool(np.any(self.params["Q"]))
-        #: the printed ODE the plant integrates in place of MuJoCo (None: MuJoCo)
-        self._printed = (None if dynamics == "physical"
-                         else self._make_dynamics(self.params))
+        #: the equations of motion with forces in newtons and no parameters of their own:
+        #: the printed ODE a single env integrates in place of MuJoCo, and every batched step
+        self._ode = self._make_dynamics({**self.params, "force_max": 1.0})
+        #: the true ``[μ, M0]`` (``(2,)``, or ``(B, 2)`` per system) and force scale (N per
+        #: unit of action: a float, or ``(B,)``) the transition reads (:meth:`_apply_params`)
+        self._theta: FloatArray = np.array([self.params["mu"], self.params["M0"]])
+        self._force_max: Any = self.params["force_max"]
+        #: the ``(μ, M0)`` MuJoCo simulates (restored when a copy rebuilds the simulation)
+        self._simulated = (float(self.params["mu"]), float(self.params["M0"]))
+        self._drawing_data: mujoco.MjData | None = None
         self._build_simulation()
 
     # ------------------------------------------------------------------ simulation
@@ -329,16 +363,42 @@ class PendulumSliderEnv(PlantEnv):
         self._qpos = [int(m.jnt_qposadr[m.joint(n).id]) for n in ("x", "theta")]
         self._dof = [int(m.jnt_dofadr[m.joint(n).id]) for n in ("x", "theta")]
         self._z_rest = self._settle_vertical() if p["friction"] == "coulomb" else None
-        self._friction_law = (PaperFrictionForce(m, p["mu"], p["m1"], p["m2"], p["l"], p["g"],
-                                                 p["I_c"])
-                              if p["friction"] == "paper" else None)
-        self._stage_rk4 = (None if self._friction_law is None
-                           else StageRK4(m, self.mj_data, self._friction_law.law))
         # views into mj_data, read at every step (a view per attribute access costs more)
         self._qpos_view, self._qvel_view = self.mj_data.qpos, self.mj_data.qvel
         self._ctrl_view = self.mj_data.ctrl
         self._warning_counts = self.mj_data.warning.number
         self._renderer: mujoco.Renderer | None = None
+        self._configure_simulation(*self._simulated)
+        mujoco.mj_forward(m, self.mj_data)           # its drawing is its state (see _scene)
+
+    def _configure_simulation(self, mu: float, M0: float) -> None:
+        """Make MuJoCo simulate the friction ``μ`` and hinge damping ``M0``: the θ joint's
+        damping, and the paper's friction law at every RK4 stage (``"paper"``) or the rail
+        contact's friction coefficient (``"coulomb"``)."""
+        p, m = self.params, self.mj_model
+        m.dof_damping[self._dof[1]] = M0
+        self._friction_law: PaperFrictionForce | None = None
+        self._stage_rk4: StageRK4 | None = None
+        if p["friction"] == "paper":
+            self._friction_law = PaperFrictionForce(m, mu, p["m1"], p["m2"], p["l"], p["g"],
+                                                    p["I_c"])
+            self._stage_rk4 = StageRK4(m, self.mj_data, self._friction_law.law)
+        elif p["friction"] == "coulomb":
+            for geom in ("slider", "rail"):
+                m.geom_friction[m.geom(geom).id, 0] = mu
+        self._simulated = (mu, M0)
+
+    def _apply_params(self, params: Mapping[str, Any]) -> None:
+        """The true ``μ``, ``M0`` and ``force_max`` (numbers, or ``(B,)`` arrays: a native vector
+        env's per-system draws) for the transition; a single env's MuJoCo simulation too."""
+        mu, M0, force_max = params["mu"], params["M0"], params["force_max"]
+        self._force_max = force_max
+        if per_system(mu, M0, force_max):        # a batch: the analytic equations read them
+            self._theta = np.stack(np.broadcast_arrays(np.asarray(mu, dtype=np.float64),
+                                                       np.asarray(M0, dtype=np.float64)), -1)
+            return
+        self._theta = np.array([float(mu), float(M0)])
+        self._configure_simulation(float(mu), float(M0))
 
     def _settle_vertical(self) -> float:
         """The slider's resting height on the rail (contact penetration), found once."""
@@ -350,8 +410,9 @@ class PendulumSliderEnv(PlantEnv):
             mujoco.mj_step(m, d)
         return float(d.qpos[z_adr])
 
-    def _write_state(self, x: FloatArray) -> None:
-        m, d = self.mj_model, self.mj_data
+    def _write_state(self, x: FloatArray, data: mujoco.MjData | None = None) -> None:
+        """Put MuJoCo's data (the simulation's, or ``data``) at the state ``x``."""
+        m, d = self.mj_model, self.mj_data if data is None else data
         mujoco.mj_resetData(m, d)
         d.qpos[self._qpos] = x[[0, 2]]
         d.qvel[self._dof] = x[[1, 3]]
@@ -360,9 +421,17 @@ class PendulumSliderEnv(PlantEnv):
         mujoco.mj_forward(m, d)
 
     def _read_state(self) -> FloatArray:
+        return np.array(self._simulated_state())
+
+    def _simulated_state(self) -> list[float]:
+        """MuJoCo's ``[x, ẋ, θ, θ̇]``, as Python floats."""
         qpos, qvel = self._qpos_view, self._qvel_view
-        return np.array((qpos.item(self._qpos[0]), qvel.item(self._dof[0]),
-                         qpos.item(self._qpos[1]), qvel.item(self._dof[1])))
+        return [qpos.item(self._qpos[0]), qvel.item(self._dof[0]),
+                qpos.item(self._qpos[1]), qvel.item(self._dof[1])]
+
+    def _holds(self, x: FloatArray) -> bool:
+        """Whether MuJoCo's data is at the state ``x`` (a single env's, after its step)."""
+        return bool(x.tolist() == self._simulated_state())
 
     # ------------------------------------------------------------------ plant hooks
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -374,10 +443,12 @@ class PendulumSliderEnv(PlantEnv):
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
         if x.ndim != 1:
-            raise ValueError("PendulumSlider-v0 simulates one system; it has no batched path")
-        force = float(a[0]) * self.params["force_max"]
-        if self._printed is not None:
+            return self._batched_transition(x, a, rng)
+        force = float(a[0]) * self._force_max
+        if self.params["dynamics"] != "physical":
             return self._printed_transition(x, a, force, rng)
+        if not self._holds(x):      # a state MuJoCo does not hold (set by hand): start there
+            self._write_state(x)
         d = self.mj_data
         self._ctrl_view[0] = force
         if self._stage_rk4 is None:
@@ -399,14 +470,44 @@ class PendulumSliderEnv(PlantEnv):
     def _printed_transition(self, x: FloatArray, a: FloatArray, force: float,
                             rng: np.random.Generator) -> tuple[FloatArray, dict[str, Any]]:
         """One env step of the printed ODE (RK4); MuJoCo only mirrors the state for drawing."""
-        dyn = self._printed
-        assert dyn is not None
-        x_next = dyn.propagate(x, np.asarray(a, dtype=np.float64), dyn.theta)[0]
+        x_next = self._ode.propagate(x, a * self._force_max, self._theta)[0]
         if self._has_process_noise:
             x_next = x_next + self._process_sqrt @ rng.standard_normal(4)
         if np.isfinite(x_next).all():      # a failed step is the base class's to report
             self._write_state(x_next)
         return x_next, {"force": force}
+
+    def _batched_transition(self, x: FloatArray, a: FloatArray, rng: np.random.Generator
+                            ) -> tuple[FloatArray, dict[str, Any]]:
+        """One env step of ``B`` systems (a native vector env): the RK4 of the equations of
+        motion (:class:`PendulumSliderDynamics`, compiled for the physical ones), each system
+        with its true ``[μ, M0]`` and force scale. With the paper's friction (or none) it is
+        the ODE MuJoCo integrates, by the same RK4 and step: the two agree to round-off."""
+        refuse_batch(self.params["friction"])
+        U = a[:, 0] * self._force_max                                  # (B,) newtons
+        x_next = self._ode.propagate(x, U[:, None], self._theta)[0]
+        if self._has_process_noise:
+            # drawn batch first, (B, 4): row i is the standard_normal(4) a single env draws;
+            # a stacked matrix-vector product, so each row is a single env's ``S @ n`` bits
+            n = rng.standard_normal(x.shape)
+            x_next = x_next + (self._process_sqrt @ n[:, :, None])[:, :, 0]
+        return x_next, {"force": U}
+
+    def _sample_initial_state(self, rng: np.random.Generator, n: int | None = None
+                              ) -> FloatArray:
+        if n is not None:                      # the first batched hook of a vector env
+            refuse_batch(self.params["friction"])
+        return super()._sample_initial_state(rng, n)
+
+    def _perturb(self, x: FloatArray, x_next: FloatArray, extra: dict[str, Any], delta: Any
+                 ) -> tuple[FloatArray, dict[str, Any]]:
+        """The burst's stretched state, put back into MuJoCo (one system): the next step starts
+        from MuJoCo's data."""
+        x_next, extra = super()._perturb(x, x_next, extra, delta)
+        if x_next.ndim == 1 and state_failure(x_next, self.state_limit) is None:
+            self._write_state(x_next)
+            self.mj_data.ctrl[0] = extra["force"]
+        return x_next, extra
 
     def _restore(self, x: FloatArray) -> None:
         self._write_state(x)
@@ -414,17 +515,25 @@ class PendulumSliderEnv(PlantEnv):
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return x.copy()
 
-    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> float:
-        # Python floats, without numpy's per-scalar overhead; products, not ``**``, so that
-        # a huge finite state overflows to inf (then the cap), never raises
-        p, _, th, w = x_next.tolist()
-        e, u = p - self.x_rest, a.item(0)
+    def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
+        p: Any                                 # floats (one system) or (B,) arrays
+        th: Any
+        w: Any
+        u: Any
+        if x_next.ndim == 1:
+            # Python floats, without numpy's per-scalar overhead; products, not ``**``, so
+            # that a huge finite state overflows to inf (then the cap), never raises
+            p, _, th, w = x_next.tolist()
+            u = a.item(0)
+        else:                                  # the same operations, in the same order
+            p, th, w, u = x_next[:, 0], x_next[:, 2], x_next[:, 3], a[:, 0]
+        e = p - self.x_rest
         cost = th * th + 0.1 * w * w + 100.0 * e * e + 0.01 * u * u
         return -saturated_cost(cost, self.BRACKET_CAP) * self._reward_scale
 
-    def _in_domain(self, x: FloatArray) -> bool:
+    def _in_domain(self, x: FloatArray) -> Any:
         if x.ndim != 1:
-            return bool(np.isfinite(x).all() and abs(x[0] - self.params["l0"]) <= 0.3)
+            return np.isfinite(x).all(axis=-1) & (np.abs(x[..., 0] - self.params["l0"]) <= 0.3)
         xs = x.tolist()
         return all(map(math.isfinite, xs)) and abs(xs[0] - self.params["l0"]) <= 0.3
 
@@ -458,14 +567,28 @@ class PendulumSliderEnv(PlantEnv):
                     "MuJoCo could not create an OpenGL context for rgb_array rendering; "
                     "without a display set MUJOCO_GL=egl (or osmesa) before importing mujoco"
                 ) from err
-        self._renderer.update_scene(self.mj_data, camera="side")
+        data = self._scene()
+        self._renderer.update_scene(data, camera="side")
         frame = self._renderer.render()
-        self._frame_view = self._camera_view()
+        self._frame_view = self._camera_view(data)
         return frame
 
-    def _camera_view(self) -> CameraView:
-        """The "side" camera as the frame just rendered sees the world."""
-        m, d = self.mj_model, self.mj_data
+    def _scene(self) -> mujoco.MjData:
+        """The MuJoCo data that draws :attr:`state`: the simulation's own when it holds the
+        state (a single env), else a drawing copy put at it (a native vector env's sub-env,
+        whose state the vector env sets before drawing). A state that is not valid draws the
+        simulation's own data."""
+        x = np.asarray(self.state, dtype=np.float64)
+        if state_failure(x, self.state_limit) is not None or self._holds(x):
+            return self.mj_data
+        if self._drawing_data is None:
+            self._drawing_data = mujoco.MjData(self.mj_model)
+        self._write_state(x, self._drawing_data)
+        return self._drawing_data
+
+    def _camera_view(self, d: mujoco.MjData) -> CameraView:
+        """The "side" camera as the frame just rendered (from ``d``) sees the world."""
+        m = self.mj_model
         cam = m.camera("side").id
         (px, py, pz), axes = d.cam_xpos[cam].tolist(), d.cam_xmat[cam].reshape(3, 3).T
         right, up, back = (tuple(row) for row in axes.tolist())  # rows of the transpose
@@ -496,7 +619,7 @@ class PendulumSliderEnv(PlantEnv):
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        state["_renderer"] = None
+        state["_renderer"] = state["_drawing_data"] = None
         state.pop("_friction_law")
         state.pop("_stage_rk4")
         state["_saved_sim"] = (self.mj_data.qpos.copy(), self.mj_data.qvel.copy(),

@@ -27,6 +27,17 @@ carrier_motion_vector = plant_vector_factory("fir_gym.envs.carrier_motion:Carrie
 van_der_pol = plant_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
 van_der_pol_vector = plant_vector_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
 pendulum_slider = plant_factory("fir_gym.envs.pendulum_slider:PendulumSliderEnv")
+_pendulum_slider_vector = plant_vector_factory("fir_gym.envs.pendulum_slider:PendulumSliderEnv")
+
+
+def pendulum_slider_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+    """Build PendulumSlider-v0's native vector env (the analytic equations of motion, batched);
+    ``friction="coulomb"`` (MuJoCo's rail contact) is refused here, before anything is built."""
+    from fir_gym.envs.pendulum_slider import refuse_batch
+
+    refuse_batch(kwargs.get("friction"))
+    return _pendulum_slider_vector(num_envs, **kwargs)
+
 
 #: Every environment id that ``import fir_gym`` registers.
 ENV_IDS: tuple[str, ...] = (
@@ -42,6 +53,7 @@ VECTOR_ENV_IDS: tuple[str, ...] = (
     "fir_gym/UncertainOscillator-v0",
     "fir_gym/CarrierMotion-v0",
     "fir_gym/VanDerPol-v0",
+    "fir_gym/PendulumSlider-v0",
 )
 
 
@@ -83,9 +95,11 @@ def register_envs() -> None:
         vector_entry_point="fir_gym._registration:van_der_pol_vector",
         max_episode_steps=100,
     )
-    # Paper 003: the pendulum on a spring-loaded slider (MuJoCo; no native vector env).
+    # Paper 003: the pendulum on a spring-loaded slider (MuJoCo; the vector env integrates
+    # the same equations of motion analytically, batched).
     register(
         id="fir_gym/PendulumSlider-v0",
         entry_point="fir_gym._registration:pendulum_slider",
+        vector_entry_point="fir_gym._registration:pendulum_slider_vector",
         max_episode_steps=5000,
     )

@@ -19,6 +19,8 @@ CASES = [
     ("fir_gym/CarrierMotion-v0", {"observation": "measurement-stack", "stack_horizon": 3}),
     ("fir_gym/UncertainOscillator-v0", {"observation": "true"}),
     ("fir_gym/VanDerPol-v0", {}),
+    # the native env integrates the analytic equations, DummyVecEnv's envs run MuJoCo
+    ("fir_gym/PendulumSlider-v0", {"estimator": "ekf", "frame_skip": 10}),
 ]
 
 
@@ -104,20 +106,21 @@ def test_the_shared_generator_keeps_the_semantics():
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
-def test_vec_env_api_get_attr_env_method_and_the_mujoco_fallback():
+def test_vec_env_api_get_attr_env_method_and_the_dummy_fallback():
     fast = make_sb3_vec_env("fir_gym/Orbit-v0", 3, estimator="ekf")
     assert isinstance(fast, VecEnv) and fast.num_envs == 3
     assert fast.get_attr("r_ref") == [8.0] * 3
     assert fast.get_attr("unwrapped", [1])[0] is fast.plant
     assert len(fast.env_method("make_model", mu=19.9)) == 3
     assert fast.env_is_wrapped(gym.Wrapper) == [False] * 3
-    slider = make_sb3_vec_env("fir_gym/PendulumSlider-v0", 2, estimator="ekf",
-                              max_episode_steps=4, frame_skip=5)
-    assert isinstance(slider, DummyVecEnv) and slider.observed == "estimate"
-    slider.reset()
-    for _ in range(4):
-        _, _, done, infos = slider.step(np.zeros((2, 1), np.float32))
-    assert done.all() and "terminal_observation" in infos[0]
+    for vec_env, kind in (("auto", SB3VecEnv), ("dummy", DummyVecEnv)):
+        slider = make_sb3_vec_env("fir_gym/PendulumSlider-v0", 2, estimator="ekf",
+                                  max_episode_steps=4, frame_skip=5, vec_env=vec_env)
+        assert isinstance(slider, kind) and slider.observed == "estimate"
+        slider.reset()
+        for _ in range(4):
+            _, _, done, infos = slider.step(np.zeros((2, 1), np.float32))
+        assert done.all() and "terminal_observation" in infos[0]
 
 
 def test_bad_arguments_are_refused_by_name():
@@ -127,8 +130,10 @@ def test_bad_arguments_are_refused_by_name():
         make_sb3_vec_env("fir_gym/Orbit-v0", 2, observation="estimate+covariance")
     with pytest.raises(ValueError, match="vec_env"):
         make_sb3_vec_env("fir_gym/Orbit-v0", 2, vec_env="threads")
-    with pytest.raises(ValueError, match="native"):
-        make_sb3_vec_env("fir_gym/PendulumSlider-v0", 2, vec_env="native")
+    with pytest.raises(ValueError, match="no native vector env"):
+        make_sb3_vec_env("CartPole-v1", 2, vec_env="native")
+    with pytest.raises(ValueError, match="friction='coulomb'"):       # MuJoCo's contact
+        make_sb3_vec_env("fir_gym/PendulumSlider-v0", 2, vec_env="native", friction="coulomb")
     with pytest.raises(ValueError, match="estimator_kwargs"):
         make_sb3_vec_env("fir_gym/Orbit-v0", 2, estimator_kwargs={"horizon": 3})
     with pytest.raises(ValueError, match="generators"):
