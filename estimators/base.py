@@ -46,6 +46,11 @@ log-likelihood is 0 there (as for a missing measurement). With a gate ``last_inf
 (rejections since ``reset``; ``restart`` zeroes the restarted systems'); without one the
 two keys are absent. A class that cannot gate (``can_gate`` False) refuses ``gate``.
 
+**A known sensor delay.** ``delay=d`` (default 0) says the measurement handed to
+:meth:`step` at ``k`` is ``y[k − d]``: the filter runs ``d`` steps behind on it and the
+model predicts the current state ``d`` steps ahead (:mod:`.delay`); ``x``, ``P`` and the
+returned estimate are that prediction, ``last_info["delayed_estimate"]`` the lagged one.
+
 **One step, two implementations.** The hooks :meth:`_update` and :meth:`_predict_update`
 (returning new arrays) with :meth:`_accept` (the watch above) are the numpy reference.
 A class that sets ``has_compiled_step`` also implements :meth:`_compiled_update` and
@@ -74,6 +79,7 @@ from numpy.typing import ArrayLike
 from . import compiled
 from ._attributes import LiveAttributes
 from ._validation import FloatArray, as_batch, as_covariance, positive, real_array
+from .delay import DelayLine, check_delay, predict_ahead
 from .model import StateSpaceModel
 from .sequences import FilterResult, filter_sequence
 
@@ -146,6 +152,7 @@ class Estimator(LiveAttributes, ABC):
         nis_tail: float = 1e-9,
         nis_patience: int = 10,
         gate: float | None = None,
+        delay: int = 0,
     ) -> None:
         if not isinstance(model, StateSpaceModel):
             raise TypeError(f"model must be a StateSpaceModel; got {type(model).__name__}")
@@ -164,7 +171,13 @@ class Estimator(LiveAttributes, ABC):
         self._limits = np.array([self._nis_threshold, float(patience), max_trace, np.inf,
                                  np.inf])
         self.gate = gate
+        self._delay = check_delay(delay, model)
         self.reset(x0, P0)
+
+    @property
+    def delay(self) -> int:
+        """The known sensor delay in steps (0: none; :mod:`.delay`), fixed at construction."""
+        return self._delay
 
     # ------------------------------------------------------------------ public API
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None) -> None:
@@ -202,6 +215,10 @@ class Estimator(LiveAttributes, ABC):
         self._fresh: np.ndarray = np.zeros(0, bool)
         self._gated: np.ndarray = np.zeros(0, bool)
         self._gated_count: np.ndarray = np.zeros(0, np.int64)
+        #: with a delay: the inputs kept and each system's age, and the estimate predicted
+        #: to the current step (:mod:`.delay`)
+        self._line: DelayLine | None = None
+        self._ahead: tuple[FloatArray, FloatArray] = (np.empty((0, n)), np.empty((0, n, n)))
         self._k = 0
         #: whether the next step is an update only: the first after ``reset``, or one after
         #: ``predict`` (:mod:`.public_steps`)
@@ -239,7 +256,17 @@ class Estimator(LiveAttributes, ABC):
         if mask.all():
             self.reset(self._x0, self._P0)
             return
-        n = self.model.n_x
+        self._restart_rows(mask)
+        if self._line is not None:
+            self._line.restart(mask)
+            x_ahead, P_ahead = self._ahead
+            x_ahead[mask] = self._x[mask]
+            P_ahead[mask] = self._P[mask]
+
+    def _restart_rows(self, mask: np.ndarray) -> None:
+        """Send the systems ``mask`` (some, not all) back to the prior: their next step is a
+        first step."""
+        n_b, n = self._n_b, self.model.n_x
         self._x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
         if self._P.shape[0] < n_b:                     # a shared covariance parts ways
             self._P = np.repeat(self._P, n_b, axis=0)
@@ -264,8 +291,16 @@ class Estimator(LiveAttributes, ABC):
         Floating-point warnings are silenced inside the numpy hooks: a diverging filter
         is reported through :attr:`diverged`, not through ``RuntimeWarning``.
         """
+        if self._delay:
+            return self._delayed_step(y, u)
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
+        self._take_step(Y, U, valid)
+        x = self._x
+        return x[0].copy() if self._single else x.copy()
+
+    def _take_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
+        """One step on checked arrays, compiled or numpy (the module docstring's rule)."""
         self._last_valid: np.ndarray = valid
         if compiled.ENABLED and self.has_compiled_step:
             if self._update_next:
@@ -281,8 +316,40 @@ class Estimator(LiveAttributes, ABC):
             self._restarting = False
         self._k += 1
         self._update_next = False
-        x = self._x
-        return x[0].copy() if self._single else x.copy()
+
+    def _delayed_step(self, y: ArrayLike | None, u: ArrayLike | None) -> FloatArray:
+        """:meth:`step` with a known delay (:mod:`.delay`): the lagged filter consumes
+        ``y[k − d]`` with ``u[k − d − 1]`` where it has started, then every system's estimate
+        is predicted to the current step."""
+        Y, valid = self._measurement(y)
+        U = self._no_input if u is None else self._input(u)
+        line = self._line
+        assert line is not None                        # made with the batch
+        lagged_input = line.push(U)
+        due = line.age >= line.delay                   # their y[k − d] exists
+        early = valid & ~due
+        if early.any():
+            raise ValueError(f"y: with delay={line.delay}, the first {line.delay} steps after a "
+                             "(re)start carry no measurement (y[k - delay] does not exist yet); "
+                             f"got one for system(s) {np.flatnonzero(early).tolist()}")
+        if due.any():
+            self._take_step(Y, lagged_input, valid)
+            if not due.all():                          # the others have not started yet
+                self._restart_rows(~due)
+        line.age += 1
+        steps = np.minimum(line.age - 1, line.delay)
+        P_lagged = None if not self.provides_covariance else np.broadcast_to(
+            self._P, (self._n_b, *self._P.shape[1:]))
+        x_new, P_new = predict_ahead(self.model, self._x, P_lagged, line.window, steps)
+        x_old, P_old = self._ahead
+        finite = np.all(np.isfinite(x_new), axis=1)
+        if P_new is not None:
+            finite &= np.all(np.isfinite(P_new), axis=(1, 2))
+        self._diverged |= ~finite                      # a prediction that left the numbers
+        x_ahead = np.where(finite[:, None], x_new, x_old)
+        P_ahead = P_old if P_new is None else np.where(finite[:, None, None], P_new, P_old)
+        self._ahead = (x_ahead, P_ahead)
+        return self._out(x_ahead)
 
     def filter(self, ys: ArrayLike, us: ArrayLike | None = None) -> FilterResult:
         """Run the filter over a whole sequence: ``step(ys[k], us[k-1])`` for every ``k``.
@@ -312,6 +379,8 @@ class Estimator(LiveAttributes, ABC):
         """The current estimate (the prior mean before the first step); a copy."""
         if not self._n_b:
             return self._x0.copy()
+        if self._line is not None:
+            return self._out(self._ahead[0])
         return self._out(self._x)
 
     @property
@@ -322,6 +391,8 @@ class Estimator(LiveAttributes, ABC):
             return self._P0.copy()
         if not self.provides_covariance:
             return None
+        if self._line is not None:
+            return self._out(self._ahead[1])
         P = self._P if self._P.shape[0] == self._n_b else np.broadcast_to(
             self._P, (self._n_b,) + self._P.shape[1:])
         return self._out(P)
@@ -357,6 +428,8 @@ class Estimator(LiveAttributes, ABC):
             ll = float(lls[0]) if self._single else lls
         info = {"diverged": self.diverged, "nis": nis, "log_likelihood": ll,
                 **self._step_info()}
+        if self._line is not None:
+            info["delayed_estimate"] = self._out(self._x)
         if self._gate is not None:
             info["gated"] = bool(self._gated[0]) if self._single else self._gated.copy()
             info["gated_count"] = (int(self._gated_count[0]) if self._single
@@ -600,6 +673,10 @@ class Estimator(LiveAttributes, ABC):
         self._none_predict = np.zeros(n_batch, bool)
         self._no_input = np.zeros((n_batch, self.model.n_u))
         self._init_batch(n_batch)
+        if self._delay:
+            self._line = DelayLine(self._delay, n_batch, self.model.n_u)
+            self._ahead = (self._x.copy(), np.array(np.broadcast_to(
+                self._P, (n_batch, n, n)), order="C"))
 
     def _predicting(self) -> np.ndarray:
         """The systems that predict this step (the compiled twins' ``predict`` mask)."""

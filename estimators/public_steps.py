@@ -43,6 +43,7 @@ class PublicSteps:
         predict-first habit).
         """
         est: Estimator = self  # type: ignore[assignment]
+        _undelayed(est, "predict")
         k, pending, run = est._k, est._update_next, est._nis_run.copy()
         est._update_next = False                       # the prediction branch, A(k-1) of k >= 1
         est._k = max(k, 1)
@@ -75,6 +76,7 @@ class PublicSteps:
         ``predict(u)`` then ``update(y)`` equals ``step(y, u)`` after the first step.
         """
         est: Estimator = self  # type: ignore[assignment]
+        _undelayed(est, "update")
         model = est.model
         changes: dict[str, Any] = {}
         if R is not None:
@@ -98,3 +100,10 @@ class PublicSteps:
             if changes:
                 est._filter_model = model
                 est._model_changed()
+
+
+def _undelayed(est: Estimator, name: str) -> None:
+    """``predict``/``update`` split the step of a filter without a delay; refuse otherwise."""
+    if est.delay:
+        raise ValueError(f"{name}: predict and update split the step of a filter without a "
+                         f"delay; this one has delay={est.delay} (use step)")

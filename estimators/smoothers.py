@@ -46,6 +46,10 @@ def smooth_sequence(est: Estimator, ys: ArrayLike, us: ArrayLike | None,
     """Filter ``ys`` forward with ``est`` (from its current state), then smooth backward with
     the filter's ``prediction`` (module docstring). ``residual(a, b)`` is ``a − b`` by default
     (a model's ``residual_x``, e.g. wrapping an angle)."""
+    if est.delay:
+        raise ValueError(f"smooth: a filter with delay={est.delay} returns predictions of the "
+                         "current state, not the filtered estimates the backward pass needs; "
+                         "smooth the undelayed sequence with delay=0")
     k0 = est.time_step
     forward = est.filter(ys, us)
     if forward.P is None:
