@@ -28,14 +28,14 @@ PRESENTATION = ("_cli_parser.py", "_commands.py", "_extras.py", "cli.py", "table
                 "training/benchmark.py", "training/curves.py")
 
 
-@functools.cache
-def code_version() -> str:
-    """The first 16 hex digits of the SHA-256 of the package's files (module docstring)."""
+def code_files() -> list[tuple[str, Path]]:
+    """``(name, path)`` of every file :func:`code_version` hashes, in its order: the name is
+    the file's path inside the installed package (``fir_gym/...``, ``fir_gym.envs/...``)."""
     import fir_gym
     import fir_gym.envs
     import fir_gym.estimators
 
-    digest = hashlib.sha256(fir_gym.__version__.encode())
+    files = []
     for package, module in (("fir_gym", fir_gym), ("fir_gym.envs", fir_gym.envs),
                             ("fir_gym.estimators", fir_gym.estimators)):
         for root in sorted(set(module.__path__)):
@@ -50,7 +50,18 @@ def code_version() -> str:
                         or relative.parts[0] in PRESENTATION
                         or relative.as_posix() in PRESENTATION):
                     continue
-                digest.update(f"{package}/{relative.as_posix()}\0".encode())
-                digest.update(path.read_bytes())
-                digest.update(b"\0")
+                files.append((f"{package}/{relative.as_posix()}", path))
+    return files
+
+
+@functools.cache
+def code_version() -> str:
+    """The first 16 hex digits of the SHA-256 of the package's files (module docstring)."""
+    import fir_gym
+
+    digest = hashlib.sha256(fir_gym.__version__.encode())
+    for name, path in code_files():
+        digest.update(f"{name}\0".encode())
+        digest.update(path.read_bytes())
+        digest.update(b"\0")
     return digest.hexdigest()[:16]
