@@ -3,11 +3,13 @@
 ``PPO("MlpPolicy", gym.make_vec(...))`` fails: stable-baselines3 has its own
 ``VecEnv`` API. :func:`make_sb3_vec_env` builds one for a fir-gym id:
 
-* where the plant has a native vector env (every plant but PendulumSlider-v0) it is
+* where the plant has a native vector env (every plant; PendulumSlider-v0's integrates
+  the equations MuJoCo simulates) it is
   :class:`SB3VecEnv` over that env in same-step autoreset mode, with one batched
   estimator (:class:`~fir_gym.wrappers.VectorEstimatorObservation`) or one batched
   measurement window (:class:`~fir_gym.wrappers.VectorMeasurementStack`) on top;
-* elsewhere (the MuJoCo plant) it is SB3's ``DummyVecEnv`` (or ``SubprocVecEnv``,
+* otherwise (``vec_env="dummy"``, e.g. for PendulumSlider-v0's ``friction="coulomb"``,
+  which its native env refuses) it is SB3's ``DummyVecEnv`` (or ``SubprocVecEnv``,
   ``vec_env="subproc"``) over single envs built the same way.
 
 The semantics are SB3's exactly (those of ``DummyVecEnv``): ``step`` returns
