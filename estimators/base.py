@@ -310,7 +310,7 @@ class Estimator(LiveAttributes, ABC):
         else:
             self._numpy_step(Y, U, valid)
         if self._gate_threshold is not None:
-            self._book_gate(valid)
+            self._book_gate(valid, self._gate_threshold)
         if self._restarting:
             self._fresh[:] = False
             self._restarting = False
@@ -436,15 +436,22 @@ class Estimator(LiveAttributes, ABC):
                                    else self._gated_count.copy())
         return info
 
-    def _book_gate(self, valid: np.ndarray) -> None:
-        """The gate's bookkeeping after a step: the systems whose usable measurement had a NIS
-        above the threshold — the ones the step rejected (every path decides on that very
-        comparison) — are counted, and their log-likelihood is 0."""
-        gated = valid & (self._nis > self._limits[4])
-        self._gated = gated
-        self._gated_count += gated
-        if gated.any():
-            self._last_valid = valid & ~gated
+    def _book_gate(self, valid: np.ndarray, threshold: float) -> None:
+        """The gate's bookkeeping after a step: the systems whose NIS is above the threshold
+        — the ones the step rejected: every path decides on that very comparison, and the NIS
+        is NaN where no measurement was usable — are counted, and their log-likelihood is 0.
+        One system takes no array operation (a few µs of a step of a few µs)."""
+        if self._n_b == 1:
+            gated = bool(self._nis[0] > threshold)
+            self._gated[0] = gated
+            if gated:
+                self._gated_count[0] += 1
+                self._last_valid = np.zeros(1, bool)
+            return
+        self._gated = self._nis > threshold
+        if self._gated.any():
+            self._gated_count += self._gated
+            self._last_valid = valid & ~self._gated
 
     def _log_likelihoods(self) -> FloatArray:
         """``(B,)`` Gaussian log-likelihood of the last innovation of every system: 0 where

@@ -90,6 +90,84 @@ def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, share
     assert not diverged.any() and not run.any()
 
 
+@pytest.mark.parametrize(("n", "m"), [(1, 1), (3, 1), (4, 2), (5, 3)])
+def test_predict_update_gates_as_update_kernel_and_as_a_missing_measurement(n, m):
+    """The gate (``limits[4]``, a NIS threshold) in the kernel: the systems above it end
+    bit for bit where the same kernel leaves them without their measurement (``valid``
+    False), their NIS kept and booked; against ``update_kernel(..., gate=)`` (the numpy
+    reference) to round-off, the rejections exactly. Thresholds are placed between the
+    systems' NIS, never within round-off of one."""
+    rng = np.random.default_rng(40 + n * 10 + m)
+    B = 90
+    x, P = rng.normal(size=(B, n)), spd(rng, (B,), n)
+    F = rng.normal(size=(B, n, n)) / np.sqrt(n) + np.eye(n)
+    H, R = rng.normal(size=(1, m, n)), spd(rng, (1,), m, 0.1)
+    Q = spd(rng, (), n, 0.01)
+    y, hx = 3.0 * rng.normal(size=(B, m)), rng.normal(size=(B, m))
+    valid = rng.uniform(size=B) > 0.1
+    predict = np.ones(B, bool)
+
+    def run(valid, limits):
+        xs, Ps = x.copy(), P.copy()
+        diverged, run_, nis = watch_state(B)
+        ck.predict_update(xs, Ps, x, F, Q, y, hx, H, R, valid, predict, diverged, run_, nis,
+                          limits, np.empty(B))
+        return xs, Ps, nis, run_
+    _, _, nis_free, _ = run(valid, LIMITS)
+    q = np.sort(nis_free[valid])
+    half = len(q) // 2
+    gate = 0.5 * (q[half - 1] + q[half])                      # the upper half above
+    watch_limits = np.array([gate, 10.0, 1e300])              # the watch's NIS run, too
+    xs, Ps, nis, runs = run(valid, np.array([*watch_limits, np.inf, gate]))
+    rejected = valid & (nis_free > gate)
+    assert rejected.sum() == len(q) - half
+    xm, Pm, _, runs_missing = run(valid & ~rejected, np.array([*watch_limits, np.inf, np.inf]))
+    np.testing.assert_array_equal(xs, xm)
+    np.testing.assert_array_equal(Ps, Pm)
+    np.testing.assert_array_equal(nis[valid], nis_free[valid])     # reported all the same
+    np.testing.assert_array_equal(runs, rejected.astype(int))     # and booked by the watch
+    assert not runs_missing.any()
+    P_pred = predict_covariance(P, F, Q)
+    want = update_kernel(x, P_pred, y - hx, H[0], R[0], valid, gate)   # x⁻ = x here
+    for a, b in zip((xs, Ps, nis), (want[0], want[1], want[3]), strict=True):
+        close(a, b, np.nanmax(np.abs(b)))
+    np.testing.assert_array_equal(want[0][rejected], x[rejected])
+    np.testing.assert_array_equal(want[1][rejected], P_pred[rejected])
+
+
+@pytest.mark.parametrize("steady", [False, True])
+def test_linear_step_writes_nothing_when_the_gate_fires_under_a_shortcut(steady):
+    """A shared covariance (or the steady state) cannot hold a rejected system's own ``P⁻``:
+    ``linear_step`` returns False before writing any state; with the gate off it runs."""
+    rng = np.random.default_rng(8)
+    n, m, B = 3, 1, 7
+    A = 0.9 * np.eye(n) + 0.05 * rng.normal(size=(n, n))
+    C, Q, R = rng.normal(size=(m, n)), 0.1 * np.eye(n), np.array([[0.5]])
+    x, P = rng.normal(size=(B, n)), np.eye(n)[None].copy()
+    y = rng.normal(size=(B, m))
+    y[4] += 1e3                                               # one outlier
+    K, W = rng.normal(size=(n, m, 1)), np.full((m, m, 1), 0.3)
+    regime = np.array([int(steady), 1])
+    valid, predict = np.ones(B, bool), np.ones(B, bool)
+    diverged, run, nis = watch_state(B)
+    logdet = np.full(B, -7.0)
+    state = [a.copy() for a in (x, P, K, W, regime, diverged, run, nis, logdet)]
+    limits = np.array([1e300, 10.0, 1e300, np.inf, 30.0])
+    u = np.zeros((1, 0))
+    done = ck.linear_step(x, P, A, np.zeros((n, 0)), u, C, Q, R, y, valid, predict, K, W,
+                          regime, diverged, run, nis, limits, logdet)
+    assert done is False
+    for before, after in zip(state, (x, P, K, W, regime, diverged, run, nis, logdet),
+                             strict=True):
+        scratch = after is K or after is W                   # the gains: written afresh by
+        if steady or not scratch:                             # every step out of the steady
+            np.testing.assert_array_equal(before, after)      # state
+    limits[4] = np.inf
+    assert ck.linear_step(x, P, A, np.zeros((n, 0)), u, C, Q, R, y, valid, predict, K, W,
+                          regime, diverged, run, nis, limits, logdet) is True
+    assert np.isfinite(nis).all()
+
+
 @pytest.mark.parametrize("m", [1, 2, 3])
 def test_predict_update_keeps_the_estimate_and_flags_where_S_is_not_positive_definite(m):
     """The numpy reference gives NaN there (``update_kernel``) and ``Estimator._accept`` keeps
