@@ -20,7 +20,17 @@ from .fir import FIRFilter
 from .fir_smoother import FIRSmoother
 from .kalman import Innovation, KalmanFilter, kf_predict, kf_update
 from .linearized import LinearizedKalmanFilter
-from .metrics import anees, chi2_band, mean_nis, nees, nis, rmse, within_band
+from .metrics import (
+    NEESSummary,
+    anees,
+    chi2_band,
+    mean_nis,
+    nees,
+    nees_summary,
+    nis,
+    rmse,
+    within_band,
+)
 from .model import LinearModel, StateSpaceModel, SystemMatrices, TimeVaryingLinearModel
 from .recursive_fir import RecursiveFIRFilter
 from .registry import estimator_class, estimator_names, make_estimator, register_estimator
@@ -54,6 +64,7 @@ __all__ = [
     "LinearModel",
     "LinearizedKalmanFilter",
     "MerweScaledSigmaPoints",
+    "NEESSummary",
     "ParametricModel",
     "RecursiveFIRFilter",
     "SigmaPoints",
@@ -79,6 +90,7 @@ __all__ = [
     "matrix_sqrt",
     "mean_nis",
     "nees",
+    "nees_summary",
     "nis",
     "register_estimator",
     "rmse",

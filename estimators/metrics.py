@@ -7,6 +7,12 @@ with ``n_x`` degrees of freedom, and the NIS ``eᵀ S⁻¹ e`` is χ² with ``n_
 average over ``M`` independent Monte Carlo runs, times ``M``, is χ² with ``M·n``
 degrees of freedom, which gives the two-sided band of :func:`chi2_band`.
 
+The mean alone is a fragile summary of a sample of per-step NEES values: one step with
+a nearly singular ``P`` can carry it by orders of magnitude while almost every other
+step is consistent. :func:`nees_summary` reports it beside the median, the 95th
+percentile and the fraction of values inside the single-value χ² band
+(docs/estimators/metrics.md#nees-summary).
+
 Arrays follow the estimators' layout: a leading run axis ``M`` and/or a time
 axis ``T`` before the state axis, e.g. errors ``(M, T, n)``, covariances
 ``(M, T, n, n)``.
@@ -14,13 +20,16 @@ axis ``T`` before the state axis, e.g. errors ``(M, T, n)``, covariances
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.stats
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray
 
-__all__ = ["anees", "chi2_band", "mean_nis", "nees", "nis", "rmse", "within_band"]
+__all__ = ["NEESSummary", "anees", "chi2_band", "mean_nis", "nees", "nees_summary", "nis", "rmse",
+           "within_band"]
 
 
 def rmse(x_true: ArrayLike, x_est: ArrayLike, axis: int | tuple[int, ...] | None = 0
@@ -101,3 +110,84 @@ def within_band(values: ArrayLike, dof: int, runs: int = 1, confidence: float = 
     lo, hi = chi2_band(dof, runs, confidence)
     v = np.asarray(values, dtype=np.float64)
     return (v >= lo) & (v <= hi)
+
+
+@dataclass(frozen=True)
+class NEESSummary:
+    """A sample of NEES (or NIS) values summarised against χ²(``dof``); see :func:`nees_summary`.
+
+    Attributes:
+        mean: the sample mean (the ANEES, *not* divided by ``dof``; χ² expects ``dof``).
+        median: the sample median (χ² expects :attr:`expected_median`, e.g. 1.386 for
+            ``dof = 2``).
+        p95: the sample's 95th percentile (χ² expects :attr:`expected_p95`).
+        in_band: the fraction of values inside :attr:`band` (χ² expects ``confidence``).
+        band: the two-sided ``confidence`` band of one χ²(``dof``) value,
+            :func:`chi2_band` ``(dof, 1, confidence)``.
+        count: the number of values; ``dof``, ``confidence`` as given.
+    """
+
+    mean: float
+    median: float
+    p95: float
+    in_band: float
+    band: tuple[float, float]
+    count: int
+    dof: int
+    confidence: float
+
+    @property
+    def expected_median(self) -> float:
+        """The median of χ²(``dof``)."""
+        return float(scipy.stats.chi2.median(self.dof))
+
+    @property
+    def expected_p95(self) -> float:
+        """The 95th percentile of χ²(``dof``)."""
+        return float(scipy.stats.chi2.ppf(0.95, self.dof))
+
+
+def nees_summary(values: ArrayLike, dof: int, confidence: float = 0.95) -> NEESSummary:
+    """Summarise a sample of per-step NEES values ``(x − x̂)ᵀ P⁻¹ (x − x̂)`` against χ²(``dof``).
+
+    For a consistent filter each value is χ² with ``dof = n_x`` degrees of freedom
+    (Bar-Shalom et al. 2001, §5.4; for the NIS, ``dof = n_y``). Returns a
+    :class:`NEESSummary`: the mean (ANEES), the median, the 95th percentile and the
+    fraction of values inside the two-sided ``confidence`` band of a single χ²(``dof``)
+    value (``scipy.stats.chi2``). Values from different steps and runs of one filter
+    are pooled; they need not be independent, but then the in-band fraction's
+    sampling spread is wider than the binomial one.
+
+    The median and the in-band fraction do not move when a handful of steps explode
+    (a nearly singular ``P``), which the mean does by orders of magnitude — report
+    them beside it (docs/estimators/metrics.md#nees-summary).
+
+    Args:
+        values: NEES values, any shape (flattened); ``+inf`` is allowed (outside the
+            band), NaN is not.
+        dof: degrees of freedom (``n_x`` for the NEES), ≥ 1.
+        confidence: the band's coverage, in (0, 1).
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.size == 0:
+        raise ValueError("nees_summary needs at least one value")
+    if np.any(np.isnan(v)) or np.any(v < 0):
+        raise ValueError("NEES values must be non-negative numbers (NaN is not a NEES)")
+    band = chi2_band(dof, 1, confidence)
+    return NEESSummary(
+        mean=float(np.mean(v)), median=_quantile(v, 0.5), p95=_quantile(v, 0.95),
+        in_band=float(np.mean(within_band(v, dof, 1, confidence))),
+        band=band, count=int(v.size), dof=int(dof), confidence=float(confidence))
+
+
+def _quantile(v: FloatArray, q: float) -> float:
+    """numpy's default (linear) quantile, and ``inf`` where it would interpolate to an ``inf``
+    (numpy gives NaN there)."""
+    if np.all(np.isfinite(v)):
+        return float(np.quantile(v, q))
+    s = np.sort(v)
+    pos = q * (s.size - 1)
+    lo, hi = int(np.floor(pos)), int(np.ceil(pos))
+    if np.isinf(s[lo]) or (hi > lo and np.isinf(s[hi])):
+        return float("inf")
+    return float(s[lo] + (pos - lo) * (s[hi] - s[lo]))
