@@ -11,7 +11,7 @@ from .bpf import BlockPulseKalmanFilter
 from .cd_ekf import ContinuousDiscreteEKF
 from .continuous import ContinuousModel
 from .continuous_estimator import ContinuousEstimator
-from .discretize import discretize_lti, linear_model_from_continuous
+from .discretize import discretize_lti, integrated_noise, linear_model_from_continuous
 from .efir import ExtendedFIRFilter
 from .em import EMResult, em
 from .errors import EstimatorOptionError, IncompatibleModelError
@@ -83,6 +83,7 @@ __all__ = [
     "estimator_class",
     "estimator_names",
     "fir_gains",
+    "integrated_noise",
     "kf_predict",
     "kf_update",
     "linear_model_from_continuous",

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_matrix, positive
+from ._validation import FloatArray, as_batch, as_matrix, positive
+from .discretize import integrated_noise
 from .model import StateSpaceModel, _central_jacobian, _ModelCore
 
 __all__ = ["ContinuousModel"]
@@ -161,22 +162,42 @@ class ContinuousModel(_ModelCore):
         return np.asarray(self._A_of_x(self._check_x(x)), dtype=np.float64)
 
     # ------------------------------------------------------------------ discrete view
-    def sampled(self, substeps: int = 10) -> StateSpaceModel:
+    def integrated_noise(self, x: ArrayLike, u: ArrayLike | None = None) -> FloatArray:
+        """The noise ``G w`` integrated over one interval ``dt`` through the linearisation at ``x``.
+
+        ``Q_d(x) = ∫₀^dt e^{J s} G Q Gᵀ e^{Jᵀ s} ds`` with ``J = ∂a/∂x (x, u)``
+        (:func:`~fir_gym.estimators.discretize.integrated_noise`, Van Loan's method): the
+        covariance at ``t + dt`` of the linearised system started from a known state at
+        ``x``. ``x`` of shape ``(n_x,)`` gives ``(n_x, n_x)``; ``(B, n_x)`` gives one
+        matrix per state, ``(B, n_x, n_x)``.
+        """
+        return integrated_noise(self.J(x, u), self.dt, G=self.G, Q=self.Q)
+
+    def sampled(self, substeps: int = 10, *, at: ArrayLike | None = None) -> StateSpaceModel:
         """The discrete-time view at period ``dt``, as a :class:`StateSpaceModel`.
 
         ``f`` is the noise-free flow over ``dt`` (classical RK4 with ``substeps``
         steps, input held), ``F`` its finite-difference Jacobian, ``h`` and ``H``
-        as here, and the first-order noise covariances ``Q dt`` (of ``w`` with
-        input ``G``) and ``R/dt`` (of the interval-average measurement, applied
-        to ``h`` at the end of the interval — the approximation the discrete
-        contract can express). It is what the Estimator base reads (sizes) and
-        lets a discrete filter run on a continuous model.
+        as here. The process noise is the integrated noise ``Q_d`` of
+        :meth:`integrated_noise` with ``G = I`` (``n_w = n_x``): exact for a linear
+        model; for a nonlinear one it is taken at the linearisation ``at`` — a state
+        ``(n_x,)``, or states ``(B, n_x)`` whose ``Q_d`` are averaged — with zero input,
+        the origin when ``at`` is absent (the discrete contract has one constant
+        ``G Q Gᵀ``; docs/estimators/models.md#process-noise). Not the first-order
+        ``G Q Gᵀ dt``, which has the rank of ``G`` where the integrated noise is full
+        rank. The measurement noise is ``R/dt`` (of the interval-average measurement,
+        applied to ``h`` at the end of the interval — the approximation the discrete
+        contract can express). It is what the Estimator base reads (sizes) and lets a
+        discrete filter run on a continuous model.
         """
         substeps = positive("substeps", substeps, integer=True)
+        points = np.zeros(self.n_x) if at is None else as_batch("at", at, self.n_x)
+        Q_d = self.integrated_noise(points)
+        if Q_d.ndim == 3:
+            Q_d = np.mean(Q_d, axis=0)
         flow = _RK4Flow(self._a, self.dt / substeps, substeps)
-        return StateSpaceModel(f=flow, h=self._h, H=self._H, Q=self.Q * self.dt,
-                               R=self.R / self.dt, G=self.G, dt=self.dt, n_u=self.n_u,
-                               name=f"{self.name} (sampled)")
+        return StateSpaceModel(f=flow, h=self._h, H=self._H, Q=Q_d, R=self.R / self.dt,
+                               dt=self.dt, n_u=self.n_u, name=f"{self.name} (sampled)")
 
 
 class _LinearParts:

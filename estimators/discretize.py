@@ -12,6 +12,15 @@ and the input held constant over each sample period ``dt`` (zero-order hold):
 involving the matrix exponential", IEEE TAC 23(3), 1978):
 ``expm([[-A, G Q Gᵀ], [0, Aᵀ]] dt) = [[·, A_d⁻¹ Q_d], [0, A_dᵀ]]``, hence
 ``Q_d = A_d · (upper-right block)``.
+
+:func:`integrated_noise` is that ``Q_d`` alone, for one ``A`` or a stack of them: the
+covariance that white noise entering through ``G`` accumulates over one sample period
+when it is integrated through the dynamics. A nonlinear model sampled from a continuous
+one uses it with ``A`` the drift's Jacobian at a linearisation point
+(:meth:`~fir_gym.estimators.ContinuousModel.sampled`,
+docs/estimators/models.md#process-noise). The first-order ``G Q Gᵀ dt`` it replaces is
+its leading term, and has the rank of ``G``: a single noise input gives a rank-one
+covariance, where the integrated noise is full rank whenever ``(A, G)`` is controllable.
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_covariance, as_matrix, positive
+from ._validation import FloatArray, as_covariance, as_matrix, positive, real_array
 from .model import LinearModel
 
 
@@ -61,17 +70,55 @@ def discretize_lti(
     B_d = E[:n, n:]
     if Q is None:
         return A_d, B_d, np.zeros((n, n))
+    return A_d, B_d, integrated_noise(A_, dt, G=G, Q=Q)
+
+
+def integrated_noise(A: ArrayLike, dt: float, *, Q: ArrayLike, G: ArrayLike | None = None
+                     ) -> FloatArray:
+    """``Q_d = ∫₀^dt e^{A s} G Q Gᵀ e^{Aᵀ s} ds``: white noise integrated over ``dt``.
+
+    The covariance at ``t + dt`` of ``ẋ = A x + G w`` started from a known state, for
+    ``w`` of spectral density ``Q`` — what the discrete model ``x[k+1] = A_d x[k] +
+    w_d[k]``, ``w_d ~ N(0, Q_d)`` needs. Computed by Van Loan's method (one matrix
+    exponential of ``[[-A, G Q Gᵀ], [0, Aᵀ]] dt``; module docstring).
+
+    Args:
+        A: the continuous state matrix ``(n, n)``, or a stack ``(..., n, n)`` of them
+            (e.g. the Jacobians of a nonlinear drift at several states): the result
+            then has the stack's shape.
+        dt: the sample period (> 0).
+        Q: spectral density of ``w`` (``q x q``; a scalar or a 1-D array of densities
+            is accepted), positive semi-definite.
+        G: noise input ``(n, q)``; defaults to the identity.
+
+    Returns:
+        ``Q_d`` (symmetrised), shape ``(n, n)`` or ``(..., n, n)``.
+    """
+    A_ = real_array("A", A)
+    if A_.ndim < 2 or A_.shape[-1] != A_.shape[-2]:
+        raise ValueError(f"A must be square, or a stack of square matrices; got shape "
+                         f"{A_.shape}")
+    if not np.all(np.isfinite(A_)):
+        raise ValueError("A must be finite; it contains NaN or inf")
+    n = A_.shape[-1]
+    dt = positive("dt", dt)
     Q_ = as_covariance("Q", Q)
     G_ = np.eye(n) if G is None else as_matrix("G", np.reshape(G, (n, -1)), (n, Q_.shape[0]))
     if G is None and Q_.shape[0] != n:
         raise ValueError(f"Q must be {n}x{n} when G is absent; got {Q_.shape}")
-    van_loan = np.zeros((2 * n, 2 * n))
-    van_loan[:n, :n] = -A_
-    van_loan[:n, n:] = G_ @ Q_ @ G_.T
-    van_loan[n:, n:] = A_.T
+    W = G_ @ Q_ @ G_.T
+    # Q_d is linear in W: the exponential runs on W scaled to unit size (a density of 1e300
+    # would otherwise overflow inside it), and the result is scaled back
+    scale = float(np.max(np.abs(W)))
+    if scale == 0.0:
+        return np.zeros(A_.shape)
+    van_loan = np.zeros(A_.shape[:-2] + (2 * n, 2 * n))
+    van_loan[..., :n, :n] = -A_
+    van_loan[..., :n, n:] = W / scale
+    van_loan[..., n:, n:] = np.swapaxes(A_, -1, -2)
     V = scipy.linalg.expm(van_loan * dt)
-    Q_d = V[n:, n:].T @ V[:n, n:]
-    return A_d, B_d, 0.5 * (Q_d + Q_d.T)
+    Q_d = np.swapaxes(V[..., n:, n:], -1, -2) @ V[..., :n, n:]
+    return scale * 0.5 * (Q_d + np.swapaxes(Q_d, -1, -2))
 
 
 def linear_model_from_continuous(

@@ -134,6 +134,7 @@ def count_task(reading: str) -> dict[str, dict[str, int]]:
     for name in (BPF, CDEKF):
         cm, counts = counted_model(continuous_model(reading))
         f = filters(cm)[name]
+        counts.clear()          # per interval: not what building the filters evaluated
         for k in range(COUNT_STEPS + 1):
             f.step(ep.Y[k])
         out[name] = dict(counts)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.integrate
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -83,6 +84,47 @@ def test_sampled_view_is_the_exact_flow_to_rk4_accuracy():
     x = np.array([[1.0, -0.5], [0.2, 0.4]])
     exact = x @ scipy.linalg.expm(A * 0.1).T
     np.testing.assert_allclose(d.f(x), exact, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(d.Q, 0.035 * 0.1)
     np.testing.assert_allclose(d.R, 1.0 / 0.1)
     assert d.dt == 0.1 and d.n_x == 2
+
+
+def quadrature_noise(J, G, Q, dt):
+    """∫₀^dt e^{J s} G Q Gᵀ e^{Jᵀ s} ds by adaptive quadrature (not Van Loan's exponential)."""
+    return scipy.integrate.quad_vec(
+        lambda s: scipy.linalg.expm(J * s) @ G @ np.atleast_2d(Q) @ G.T
+        @ scipy.linalg.expm(J * s).T, 0.0, dt, epsabs=1e-14, epsrel=1e-11)[0]
+
+
+def test_sampled_noise_of_a_linear_model_is_the_integrated_noise():
+    """Exact for a linear model wherever it is linearised: ∫ e^{As} G Q Gᵀ e^{Aᵀs} ds, full
+    rank (G Q Gᵀ dt, the first-order term, is rank one here), with G = I."""
+    m = carrier()
+    expected = quadrature_noise(A, G, 0.035, 0.1)
+    for at in (None, [3.0, -1.0], np.ones((4, 2))):
+        d = m.sampled(at=at)
+        np.testing.assert_allclose(d.Q, expected, rtol=1e-9, atol=1e-15)
+        np.testing.assert_array_equal(d.G, np.eye(2))
+        assert d.n_w == 2
+    assert np.linalg.matrix_rank(expected) == 2
+
+
+def test_sampled_noise_of_a_nonlinear_model_is_taken_at_its_linearisation():
+    """Van der Pol: at the origin by default; at given states, the mean of each state's
+    integral of its own Jacobian (quadrature of the closed-form J = [[0, 1], [−1 − 2ε x1 x2,
+    ε (1 − x1²)]])."""
+    m = van_der_pol_continuous_model(VDP)
+    g = np.ones((2, 1))
+
+    def J(x1, x2):
+        return np.array([[0.0, 1.0], [-1.0 - 2.0 * x1 * x2, 1.0 - x1 * x1]])
+
+    np.testing.assert_allclose(m.sampled().Q, quadrature_noise(J(0, 0), g, 5.0, 0.1),
+                               rtol=1e-9)
+    states = np.array([[2.0, 0.0], [-1.0, 2.5], [0.5, -1.0]])
+    expected = np.mean([quadrature_noise(J(*x), g, 5.0, 0.1) for x in states], axis=0)
+    np.testing.assert_allclose(m.sampled(at=states).Q, expected, rtol=1e-9)
+    np.testing.assert_allclose(m.integrated_noise(states)[1],
+                               quadrature_noise(J(*states[1]), g, 5.0, 0.1), rtol=1e-9)
+    assert m.integrated_noise(states).shape == (3, 2, 2)
+    with pytest.raises(ValueError, match="at must have shape"):
+        m.sampled(at=np.zeros(3))
