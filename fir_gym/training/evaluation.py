@@ -10,7 +10,14 @@ sees an estimate — the estimator's error on the closed loop it drives:
 * ``anees``: the average NEES ``(x − x̂)ᵀ P⁻¹ (x − x̂)`` over the same steps, divided
   by ``n_x`` (1 for a consistent filter; Bar-Shalom et al. 2001, §5.4), where the
   estimator has a covariance (steps where ``P`` is not positive definite are left out
-  and counted in ``nees_skipped``).
+  and counted in ``nees_skipped``);
+* ``nees_median``: the median of the same per-step NEES values divided by the median of
+  χ²(``n_x``) (1 for a consistent filter, as ``anees`` is the mean divided by ``n_x``,
+  the mean of χ²(``n_x``)), and ``nees_in_band``: the fraction of them inside the
+  two-sided 95 % band of one χ²(``n_x``) value (0.95 for a consistent filter). A few
+  steps with a nearly singular ``P`` can carry the mean by orders of magnitude; the
+  median and the in-band fraction show whether the rest are consistent
+  (:func:`fir_gym.estimators.metrics.nees_summary`, docs/estimators/metrics.md#nees-summary).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from fir_gym.estimators.metrics import nees
+from fir_gym.estimators.metrics import nees, nees_summary
 
 from .kinds import controller_options, is_learned, recipe
 from .run import RunConfig, algorithm_class
@@ -29,7 +36,10 @@ from .run import RunConfig, algorithm_class
 
 @dataclass
 class Evaluation:
-    """Per-episode returns and lengths, and the closed-loop estimation error (or None)."""
+    """Per-episode returns and lengths, and the closed-loop estimation error (or None).
+
+    ``anees``, ``nees_median`` and ``nees_in_band`` are described in the module docstring.
+    """
 
     returns: list[float]
     lengths: list[int]
@@ -37,6 +47,8 @@ class Evaluation:
     anees: float | None = None
     nees_skipped: int = 0
     diverged_episodes: int = 0
+    nees_median: float | None = None
+    nees_in_band: float | None = None
 
     @property
     def mean(self) -> float:
@@ -135,11 +147,14 @@ def evaluate(run: str | Path | RunConfig, *, episodes: int = 20, seed: int = 10_
         diverged += gone
     env.close()
     n_x = len(env.unwrapped.state_names)
+    summary = nees_summary(nees_values, n_x) if nees_values else None
     return Evaluation(
         returns=returns, lengths=lengths,
         rmse=np.sqrt(np.mean(np.square(errors), axis=0)).tolist() if errors else None,
         anees=float(np.mean(nees_values)) / n_x if nees_values else None,
-        nees_skipped=int(skipped), diverged_episodes=int(diverged))
+        nees_skipped=int(skipped), diverged_episodes=int(diverged),
+        nees_median=None if summary is None else summary.median / summary.expected_median,
+        nees_in_band=None if summary is None else summary.in_band)
 
 
 def _batch(obs: Any) -> Any:
