@@ -29,6 +29,7 @@ SEEN = ("true", "estimate", "measurement")
 
 def plant_of(env: Any) -> Any:
     """The fir-gym plant behind a Gymnasium env or a stable-baselines3 ``VecEnv``."""
+    plant: Any
     if isinstance(env, gym.Env):
         plant = env.unwrapped
     elif isinstance(env, gym.vector.VectorEnv):        # a native vector env (wrapped)

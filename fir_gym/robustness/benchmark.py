@@ -53,12 +53,12 @@ def lqg_tasks(plants: Sequence[str], conditions: Sequence[str], *, quick: bool =
               ) -> list[LQGTask]:
     """Every cell of the LQG grid: per plant, the true state and every applicable estimator
     plain and gated, under every setting."""
-    episodes = int(QUICK["lqg_episodes"]) if quick else LQG_EPISODES
+    episodes = QUICK.lqg_episodes if quick else LQG_EPISODES
     tasks = []
     for env_id in plants:
         estimators = applicable_estimators(env_id)
         if quick:
-            estimators = estimators[:2]
+            estimators = estimators[:QUICK.lqg_estimators]
         observed = [("true", False)] + [(e, g) for e in estimators for g in (False, True)]
         for condition, strength in settings(conditions, quick=quick):
             tasks += [LQGTask(env_id, name, gated, condition, strength, episodes, EVAL_SEED)
@@ -71,17 +71,17 @@ def learned_tasks(plants: Sequence[str], conditions: Sequence[str], out: Path, *
     """Every (plant, kind, regime, seed) of the learned grid, costliest plants first."""
     from .learned_grid import LearnedTask
 
-    n_seeds = seeds or (int(QUICK["seeds"]) if quick else SEEDS)
-    episodes = int(QUICK["episodes"]) if quick else EPISODES
-    regimes = QUICK["regimes"] if quick else tuple(REGIMES)
+    n_seeds = seeds or (QUICK.seeds if quick else SEEDS)
+    episodes = QUICK.episodes if quick else EPISODES
+    regimes = QUICK.regimes if quick else tuple(REGIMES)
     chosen = settings(conditions, quick=quick)
     tasks = []
     for env_id in plants:
         plan = PLANTS[env_id]
-        kinds = list(QUICK["kinds"] if quick else (*PLAIN_KINDS, *plan.learned_estimators))
+        kinds = list(QUICK.kinds if quick else (*PLAIN_KINDS, *plan.learned_estimators))
         if quick:
             kinds.append(plan.learned_estimators[0])
-        steps = int(QUICK["steps"]) if quick else plan.steps
+        steps = QUICK.steps if quick else plan.steps
         folder = out / "runs" / env_id.split("/")[-1]
         for regime in regimes:
             for kind in kinds:
@@ -105,7 +105,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     out = Path(out)
     chosen_plants, chosen_conditions = check_selection(plants, conditions)
     if quick and plants is None:
-        chosen_plants = [p for p in QUICK["plants"] if p in chosen_plants]
+        chosen_plants = [p for p in QUICK.plants if p in chosen_plants]
     runner = runner or SERIAL
     start = time.perf_counter()
     lqg = lqg_tasks(chosen_plants, chosen_conditions, quick=quick)

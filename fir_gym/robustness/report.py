@@ -78,8 +78,8 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
         "band (0.95 for a consistent filter). Diverged: the fraction of episodes whose "
         "divergence flag rose. Recovery: after a burst, the median number of steps until "
         "the estimation error's 10-step level is back at its pre-burst 95th percentile "
-        "(`>`: censored by the episode's end). `+gate`: the estimator with its innovation gate. Learned rows "
-        "name their training regime in brackets.", ""]
+        "(`>`: censored by the episode's end). `+gate`: the estimator with its innovation "
+        "gate. Learned rows name their training regime in brackets.", ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report.get("answers", [])] + [""]
     conditions = report.get("conditions", {})
     by_plant: dict[str, list[dict[str, Any]]] = {}

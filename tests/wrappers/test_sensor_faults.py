@@ -149,7 +149,7 @@ def test_missing_readings_reach_the_estimator_as_missing():
 def test_dropped_readings_in_a_vector_env_are_masked_per_system():
     venv = gym.make_vec(ORBIT, 4, vectorization_mode="vector_entry_point", generators="per_env")
     faulty = VectorEstimatorObservation(VectorSensorFaults(venv, dropout=0.5), "ekf")
-    obs, info = faulty.reset(seed=10)
+    faulty.reset(seed=10)
     estimator = faulty.estimator
     twin = copy.deepcopy(estimator)
     seen_missing = seen_present = False
@@ -205,8 +205,8 @@ def test_same_step_autoreset_reads_the_last_reading_then_the_first():
                         max_episode_steps=5, autoreset_mode=AutoresetMode.SAME_STEP)
     wrapped = VectorSensorFaults(venv, delay=2)
     wrapped.reset(seed=0)
-    for t in range(5):
-        obs, _, term, trunc, info = wrapped.step(np.zeros((2, 1), dtype=np.float32))
+    for _ in range(5):
+        _, _, _, trunc, info = wrapped.step(np.zeros((2, 1), dtype=np.float32))
     assert np.all(trunc)
     # the new episode's first reading is late (delay 2): missing, the prior's reading held
     assert np.all(info["measurement_missing"])
