@@ -122,6 +122,9 @@ class Estimator(LiveAttributes, ABC):
     provides_covariance: ClassVar[bool] = True
     #: the plant attribute holding the model this filter is built from
     model_attribute: ClassVar[str] = "model"
+    #: whether a step may go without a measurement (``step(None)``, a masked or NaN row);
+    #: a filter that cannot refuses it with a ValueError that says why
+    accepts_missing: ClassVar[bool] = True
     #: whether the step computes a normalised innovation squared (``last_info["nis"]``)
     reports_nis: ClassVar[bool] = True
     #: whether the step computes the Gaussian log-likelihood of its innovation (the

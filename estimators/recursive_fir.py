@@ -68,8 +68,10 @@ class RecursiveFIRFilter(FIRFilter):
     ``step`` returns the filter estimate; :attr:`x_smoothed` is the window-start
     estimate ``s``; ``last_info["reinitialised"]`` says whether this step used the
     direct form (per system: a restarted system re-initialises when its window
-    fills). ``nan_policy="skip"`` is not supported (the recursion needs every
-    measurement). ``P`` is the direct filter's error covariance. For the same reason it
+    fills). It needs every measurement: a missing one (``step(None)``, a masked or NaN
+    row, ``nan_policy="skip"``) is refused with a ValueError — the recursion has no
+    missing-data form, and the window would otherwise read it as 0. ``P`` is the direct
+    filter's error covariance. For the same reason it
     refuses ``gate`` (the innovation gate treats a rejected measurement as missing): use
     :class:`FIRFilter`, whose estimate it equals, to gate.
     """
@@ -77,6 +79,7 @@ class RecursiveFIRFilter(FIRFilter):
     name: ClassVar[str] = "rfir"
     _extra_slots: ClassVar[int] = 1
     can_gate: ClassVar[bool] = False
+    accepts_missing: ClassVar[bool] = False
     no_gate_reason: ClassVar[str] = ("the recursion needs every measurement, and a rejected "
                                      "one would be a missing one; FIRFilter gates")
 
@@ -170,6 +173,16 @@ class RecursiveFIRFilter(FIRFilter):
         r = self._info_reinit
         reinit = bool(np.asarray(r).ravel()[0]) if self._single else np.array(r)
         return {**super()._step_info(), "reinitialised": reinit}
+
+    def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
+                 ) -> tuple[FloatArray, FloatArray, None]:
+        if not valid.all():
+            raise ValueError("y: RecursiveFIRFilter needs every measurement (its recursion has "
+                             "no missing-data form; a missing one would enter the window as "
+                             "0); got none for system(s) "
+                             f"{np.flatnonzero(~valid).tolist()}: use FIRFilter ('fir'), whose "
+                             "estimate it equals")
+        return super()._advance(y, u, valid)
 
     def _gain_step(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
         nb, n, p, L = self._buf.shape[0], self._n, self._p, self.horizon

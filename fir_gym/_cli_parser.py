@@ -219,15 +219,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_compare)
 
     p = command("benchmark-controllers",
-                "the published benchmark: Orbit, VanDerPol, PendulumSlider x eight kinds x "
-                "5 seeds (about 90 min on 2 cores)")
+                "controllers on estimates: the five plants x eight kinds x 5 seeds (about "
+                "2.5 h on 2 cores)")
     p.add_argument("--quick", action="store_true",
                    help="2 seeds and tiny budgets: checks the pipeline in under 3 minutes")
     p.add_argument("--out", default="benchmark", help="output folder")
     p.add_argument("--seeds", type=positive_int, default=None,
                    help="seeds per learned kind (default: 5; 2 with --quick)")
     p.add_argument("--plants", default=None,
-                   help="comma-separated subset of the plants (default: all three)")
+                   help="comma-separated subset of the plants (default: all five)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_runner_options(p, "(plant, kind, seed) jobs")
     p.set_defaults(func=commands.cmd_benchmark)

@@ -62,6 +62,9 @@ class Condition:
     high_open: bool = False
     integer: bool = False
     acts_on: str = "sensor"
+    #: whether some steps carry no reading (a filter that needs every measurement cannot
+    #: run under it: ``Estimator.accepts_missing``)
+    misses_readings: bool = False
 
     def check(self, strength: Any) -> float:
         """``strength`` as a number in range; ValueError naming the condition otherwise."""
@@ -110,18 +113,18 @@ CONDITIONS: dict[str, Condition] = {c.name: c for c in (
     Condition("burst", "the dynamics run 1+δ times as fast for a tenth of the episode",
               "δ", (0.05, 0.15, 0.3), low=-1.0, low_open=True, acts_on="plant"),
     Condition("dropout", "readings lost", "probability of a lost reading", (0.1, 0.3, 0.6),
-              high=1.0),
+              high=1.0, misses_readings=True),
     Condition("outliers", f"readings hit by {OUTLIER_SCALE:g}σ outliers",
               "probability of an outlier", (0.01, 0.05, 0.1), high=1.0),
     Condition("stuck", f"the sensor freezes ({STUCK_STEPS} steps on average)",
               "probability per step that a working sensor freezes", (0.005, 0.02, 0.05),
-              high=1.0),
+              high=1.0, misses_readings=True),
     Condition("bias", "an undetected offset from the episode's middle",
               "measurement-noise standard deviations", (1.0, 3.0, 10.0)),
     Condition("delay", "readings arrive late (the estimator is told)", "steps of delay",
-              (1, 2, 5), low=1, integer=True),
+              (1, 2, 5), low=1, integer=True, misses_readings=True),
     Condition("multirate", "the sensor samples every few steps", "steps between samples",
-              (2, 5, 10), low=2, integer=True),
+              (2, 5, 10), low=2, integer=True, misses_readings=True),
 )}
 
 

@@ -52,7 +52,8 @@ def run_task(task: Any) -> Any:
 def lqg_tasks(plants: Sequence[str], conditions: Sequence[str], *, quick: bool = False
               ) -> list[LQGTask]:
     """Every cell of the LQG grid: per plant, the true state and every applicable estimator
-    plain and gated, under every setting."""
+    plain and gated, under every setting — except what an estimator refuses
+    (:func:`skipped`)."""
     episodes = QUICK.lqg_episodes if quick else LQG_EPISODES
     tasks = []
     for env_id in plants:
@@ -62,8 +63,39 @@ def lqg_tasks(plants: Sequence[str], conditions: Sequence[str], *, quick: bool =
         observed = [("true", False)] + [(e, g) for e in estimators for g in (False, True)]
         for condition, strength in settings(conditions, quick=quick):
             tasks += [LQGTask(env_id, name, gated, condition, strength, episodes, EVAL_SEED)
-                      for name, gated in observed]
+                      for name, gated in observed
+                      if refusal(name, gated, condition) is None]
     return tasks
+
+
+def refusal(estimator: str, gated: bool, condition: str) -> str | None:
+    """Why ``estimator`` (gated or not) cannot run under ``condition``, or ``None``: a filter
+    that refuses the gate, or one that needs every measurement under a condition that
+    misses some (the LQG grid leaves those cells out and the report says why)."""
+    from fir_gym.estimators import estimator_class
+
+    if estimator == "true":
+        return None
+    cls = estimator_class(estimator)
+    if gated and not cls.can_gate:
+        return (f"{estimator} refuses the gate ("
+                f"{getattr(cls, 'no_gate_reason', 'it has no innovation test')})")
+    if not cls.accepts_missing and get_condition(condition).misses_readings:
+        return (f"{estimator} needs every measurement, and {condition} leaves some out "
+                "(use fir)")
+    return None
+
+
+def skipped(plants: Sequence[str], conditions: Sequence[str]) -> list[str]:
+    """The LQG grid's cells left out, one sentence per (plant, estimator, reason)."""
+    out: list[str] = []
+    for env_id in plants:
+        for estimator in applicable_estimators(env_id):
+            reasons = {refusal(estimator, gated, condition)
+                       for condition in conditions for gated in (False, True)} - {None}
+            out += [f"{env_id.split('/')[-1]}: {reason}" for reason in sorted(r for r in reasons
+                                                                              if r)]
+    return out
 
 
 def learned_tasks(plants: Sequence[str], conditions: Sequence[str], out: Path, *,
@@ -136,6 +168,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
             for name in chosen_conditions},
         "strength_meaning": {name: get_condition(name).strength_meaning
                              for name in chosen_conditions},
+        "skipped": skipped(chosen_plants, chosen_conditions),
         "tables": tables}
     report["answers"] = answers(report, records)
     out.mkdir(parents=True, exist_ok=True)

@@ -80,6 +80,9 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
         "the estimation error's 10-step level is back at its pre-burst 95th percentile "
         "(`>`: censored by the episode's end). `+gate`: the estimator with its innovation "
         "gate. Learned rows name their training regime in brackets.", ""]
+    if report.get("skipped"):
+        lines += ["Left out of the LQG grid (the estimator refuses the setting): "
+                  + "; ".join(report["skipped"]) + ".", ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report.get("answers", [])] + [""]
     conditions = report.get("conditions", {})
     by_plant: dict[str, list[dict[str, Any]]] = {}

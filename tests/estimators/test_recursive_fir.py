@@ -119,3 +119,21 @@ def test_batch_in_lockstep_equals_separate_filters() -> None:
         alone = RecursiveFIRFilter(model(), horizon=6, reinit_every=15)
         sep = np.array([alone.step(Y[k, b], U[k - 1, b] if k else None) for k in range(40)])
         assert np.abs(out[:, b] - sep).max() <= 1e-12 * max(1.0, np.abs(sep).max())
+
+
+def test_a_missing_measurement_is_refused_not_read_as_zero() -> None:
+    """The recursion has no missing-data form: step(None), a masked row and a NaN row are
+    refused naming y (before, the window read them as 0), and the filter goes on as if the
+    refused call had not happened (it equals a twin that never saw it)."""
+    ys, us = data(12, True)
+    r, twin = RecursiveFIRFilter(model(), horizon=4), RecursiveFIRFilter(model(), horizon=4)
+    for k in range(6):
+        u = us[k - 1] if k else None
+        r.step(ys[k], u)
+        twin.step(ys[k], u)
+    assert not RecursiveFIRFilter.accepts_missing
+    for missing in (None, np.ma.masked_array(ys[6], mask=[True])):
+        with pytest.raises(ValueError, match=r"y: RecursiveFIRFilter needs every measurement"):
+            r.step(missing, us[5])
+    for k in range(6, 12):
+        np.testing.assert_array_equal(r.step(ys[k], us[k - 1]), twin.step(ys[k], us[k - 1]))
