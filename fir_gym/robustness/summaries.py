@@ -26,19 +26,19 @@ from .recovery import recovery_time
 
 
 def nees_statistics(values: Any, n_x: int) -> dict[str, Any]:
-    """Mean, median, in-band fraction (95 % χ²(n_x), two-sided) and the count of missing
-    values of a pooled NEES sample (NaN entries are the steps without a usable ``P``)."""
-    from fir_gym.estimators.metrics import chi2_band
+    """:func:`fir_gym.estimators.metrics.nees_summary` of a pooled NEES sample, whose NaN
+    entries (the steps without a positive-definite ``P``) are counted and left out."""
+    from fir_gym.estimators.metrics import chi2_band, nees_summary
 
     v = np.asarray(values, dtype=np.float64).ravel()
-    finite = v[np.isfinite(v)]
-    low, high = chi2_band(n_x)
+    finite = v[~np.isnan(v)]
     if not len(finite):
-        return {"mean": None, "median": None, "in_band": None, "band": [low, high],
-                "skipped": int(v.size)}
-    return {"mean": float(finite.mean()), "median": float(np.median(finite)),
-            "in_band": float(np.mean((finite >= low) & (finite <= high))),
-            "band": [low, high], "skipped": int(v.size - finite.size)}
+        return {"mean": None, "median": None, "p95": None, "in_band": None,
+                "band": list(chi2_band(n_x)), "skipped": int(v.size)}
+    summary = nees_summary(finite, n_x)
+    return {"mean": summary.mean, "median": summary.median, "p95": summary.p95,
+            "in_band": summary.in_band, "band": list(summary.band),
+            "skipped": int(v.size - finite.size)}
 
 
 def episode_summary(episodes: Episodes, *, n_x: int,
