@@ -176,3 +176,23 @@ def test_through_the_sensor_wrapper_the_estimator_is_told_the_delay():
             j = k - d
             expected = reference.step(clean[j], actions[j - 1] if j >= 1 else None)
             np.testing.assert_array_equal(info["estimator_info"]["delayed_estimate"], expected)
+
+
+@pytest.mark.parametrize("name", ["kf", "ekf", "ukf", "fir", "efir"])
+def test_a_gated_outlier_under_a_delay_is_a_missing_reading(name):
+    """delay and gate together: a 100σ outlier among the delayed readings leaves the delayed,
+    gated filter exactly where a delayed filter fed that reading as missing ends."""
+    env, ys, us, _ = _episode("fir_gym/CarrierMotion-v0")
+    d, hit = 2, 15
+    gated, twin = _build(env, name, delay=d, gate=0.999), _build(env, name, delay=d, gate=0.999)
+    sigma = float(np.sqrt(env.unwrapped.measurement_cov[0, 0]))
+    for k in range(len(ys)):
+        y = ys[k - d] if k >= d else None
+        u = us[k - 1] if k >= 1 else None
+        outlier = y + 100 * sigma if k == hit else y
+        a = gated.step(outlier, u)
+        b = twin.step(None if k == hit else y, u)
+        np.testing.assert_array_equal(a, b)
+        if k == hit:
+            assert gated.last_info["gated"]
+    assert gated.last_info["gated_count"] == 1
