@@ -107,11 +107,11 @@ def integrated_noise(A: ArrayLike, dt: float, *, Q: ArrayLike, G: ArrayLike | No
     if G is None and Q_.shape[0] != n:
         raise ValueError(f"Q must be {n}x{n} when G is absent; got {Q_.shape}")
     W = G_ @ Q_ @ G_.T
-    # Q_d is linear in W: the exponential runs on W scaled to unit size (a density of 1e300
-    # would otherwise overflow inside it), and the result is scaled back
-    scale = float(np.max(np.abs(W)))
-    if scale == 0.0:
-        return np.zeros(A_.shape)
+    # Q_d is linear in W. expm chooses its scaling and squaring from the norm of the whole
+    # block, so a large W (≫ 1) would set it and cost accuracy (1e-12 relative at 1e5,
+    # garbage past 1e50): a W larger than 1 runs scaled to unit size and is scaled back.
+    # A W up to 1 runs as it is (so the carrier's Q_d keeps its bits).
+    scale = max(1.0, float(np.max(np.abs(W))))
     van_loan = np.zeros(A_.shape[:-2] + (2 * n, 2 * n))
     van_loan[..., :n, :n] = -A_
     van_loan[..., :n, n:] = W / scale
