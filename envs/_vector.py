@@ -69,6 +69,7 @@ from fir_gym.estimators._validation import one_of
 from ._base import RESET_OPTIONS, PlantEnv, state_failure, valid_states
 from ._conditions import burst_delta, condition_generator, draw_params
 from ._inputs import real_array, reset_options
+from ._streams import RowStreams
 
 FloatArray = NDArray[np.float64]
 GENERATORS = ("shared", "per_env")
@@ -113,7 +114,8 @@ class PlantVectorEnv(VectorEnv):
         self.plant = plant_class(render_mode=render_mode, **plant_kwargs)
         self.autoreset_mode = mode
         self.generators = generators
-        self._generators: list[np.random.Generator] | None = None
+        #: ``per_env``: each sub-env's generator, served through buffered streams
+        self._normals: RowStreams | None = None
         #: the condition draws' generator(s): one, or one per sub-env (``per_env``)
         self._condition_rngs: list[np.random.Generator] | None = None
         self.num_envs = int(num_envs)
@@ -277,11 +279,12 @@ class PlantVectorEnv(VectorEnv):
             seeds = [None] * n
         else:
             seeds = [int(seed) + i for i in range(n)]
-        if self._generators is None:
-            self._generators = [np_random(s)[0] for s in seeds]
+        if self._normals is None:
+            self._normals = RowStreams([np_random(s)[0] for s in seeds], "normal")
         else:
-            self._generators = [g if s is None else np_random(s)[0]
-                                for g, s in zip(self._generators, seeds, strict=True)]
+            for i, s in enumerate(seeds):
+                if s is not None:
+                    self._normals.replace(i, np_random(s)[0])
 
     def _seed_conditions(self, seed: int | list[int | None] | None) -> None:
         """(Re)seed the condition generator(s) as :meth:`reset` seeds the plant's: sub-env ``i``
@@ -324,9 +327,9 @@ class PlantVectorEnv(VectorEnv):
 
     def _rng(self, rows: np.ndarray) -> Any:
         """The generator the plant's hooks draw from for the systems ``rows`` (a mask)."""
-        if self._generators is None:
+        if self._normals is None:
             return self.np_random
-        return RowGenerators(self._generators, rows)
+        return RowNormals(self._normals, rows)
 
     def _failures(self, x_next: FloatArray, valid: np.ndarray, reward: FloatArray,
                   obs: FloatArray, done: np.ndarray) -> np.ndarray | None:
@@ -410,40 +413,50 @@ class PlantVectorEnv(VectorEnv):
         return out
 
 
-class RowGenerators:
-    """One generator per system, behind the ``standard_normal`` the plant hooks draw with.
+class RowNormals:
+    """Each system's own normal stream behind the ``standard_normal`` the plant hooks draw
+    with (``generators="per_env"``).
 
     A hook draws a batch as ``rng.standard_normal((B,) + shape)`` (batch axis first) where
-    one system draws ``standard_normal(shape)``. This stand-in draws row ``i`` from the
-    ``i``-th selected generator with ``shape``, so each system's numbers are those of a
-    single env with that generator. ``rows`` selects the systems drawing: a draw of
-    ``B = len(rows)`` rows gives zeros (without consuming) to the unselected ones (a
-    system restarting in this step); a draw of ``rows.sum()`` rows serves only the
-    selected ones (their fresh initial states).
+    one system draws ``standard_normal(shape)``. This stand-in serves row ``i`` the next
+    numbers of the ``i``-th selected system's stream (:class:`~._streams.RowStreams`: its
+    generator's numbers, in order), so each system's numbers are those of a single env with
+    that generator. ``rows`` selects the systems drawing: a draw of ``B = len(rows)`` rows
+    gives zeros (without consuming) to the unselected ones (a system restarting in this
+    step); a draw of ``rows.sum()`` rows serves only the selected ones (their fresh initial
+    states).
     """
 
-    def __init__(self, generators: list[np.random.Generator], rows: np.ndarray) -> None:
-        self.generators, self.rows = generators, rows
+    def __init__(self, streams: RowStreams, rows: np.ndarray) -> None:
+        self.streams, self.rows = streams, rows
 
     def standard_normal(self, size: Any = None) -> FloatArray:
         size = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
         n, shape = size[0], size[1:]
-        picked = [g for g, r in zip(self.generators, self.rows.tolist(), strict=True) if r]
-        if n == len(picked):
-            return np.array([g.standard_normal(shape) for g in picked]).reshape(size)
-        if n != len(self.generators):
-            raise ValueError(f"a batched draw must have {len(self.generators)} or "
-                             f"{len(picked)} rows first; got size {size}")
+        k = int(np.prod(shape)) if shape else 1
+        picked = int(self.rows.sum())
+        if n == picked:
+            return self.streams.draw(self.rows, k).reshape(size)
+        total = len(self.streams.generators)
+        if n != total:
+            raise ValueError(f"a batched draw must have {total} or {picked} rows first; got "
+                             f"size {size}")
         out = np.zeros(size)
-        for i, (g, r) in enumerate(zip(self.generators, self.rows.tolist(), strict=True)):
-            if r:
-                out[i] = g.standard_normal(shape)
+        out[self.rows] = self.streams.draw(self.rows, k).reshape((picked, *shape))
         return out
 
+
+class RowGenerators:
+    """One ``uniform(low, high)`` draw per selected system from its own generator, as a
+    single env draws it (a float): the condition draws of a ``per_env`` vector env, made
+    once per (re)start, so no buffering is needed."""
+
+    def __init__(self, generators: list[np.random.Generator], rows: np.ndarray) -> None:
+        self.generators, self.rows = generators, rows
+
     def uniform(self, low: float = 0.0, high: float = 1.0, size: Any = None) -> FloatArray:
-        """One ``uniform(low, high)`` draw (a float, as a single env draws it) per selected
-        system, as an array of ``size`` rows: the selected ones (``rows.sum()``), or all of
-        them with zeros for the unselected (which do not draw)."""
+        """One draw per selected system, as an array of ``size`` rows: the selected ones
+        (``rows.sum()``), or all of them with zeros for the unselected (which do not draw)."""
         n = int(size if isinstance(size, (int, np.integer)) else next(iter(size)))
         picked = [g for g, r in zip(self.generators, self.rows.tolist(), strict=True) if r]
         if n == len(picked):

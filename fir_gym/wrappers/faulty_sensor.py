@@ -24,13 +24,14 @@ measurement the plant's prior predicts, ``h(initial_state)`` — no value ever c
 truth). Per system and step the flags say which faults acted on what was delivered:
 ``dropped``, ``stuck``, ``outlier``, ``biased``, ``unsampled``, ``late`` (nothing due yet).
 
-Random numbers: every step draws, per system and in this order, one uniform for the stuck
-chain (with ``stuck``), one uniform and ``n_y`` normals for the outliers (with
-``outliers``) and one uniform for the dropout (with ``dropout``) — whatever the outcome, so
-that the stream does not depend on the faults' history. With one generator per system each
-system draws scalars from its own generator (a single env is a batch of one), so system
-``i`` of a batch equals a single env with that generator; with one shared generator the
-batch draws arrays (the same distributions, other numbers).
+Random numbers: four streams per system — the stuck chain's uniforms, the outliers'
+uniforms, the outliers' normals (``n_y`` a step) and the dropout's uniforms — from four
+generators spawned from the seed sequence ``[seed, FAULT_STREAM]`` of the system's episode
+(:func:`fault_generators`). A stream is drawn once every step while its fault is on,
+whatever the outcome, and never otherwise, so one fault's numbers do not depend on which
+others are on or on the faults' history. Every system has its own streams (served a block
+at a time by :class:`~fir_gym.envs._streams.RowStreams`, bit for bit the scalar draws), so
+system ``i`` of a batch seeded ``seed + i`` equals a single env seeded ``seed + i``.
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fir_gym.envs._streams import RowStreams
+
 FloatArray = NDArray[np.float64]
 
 #: the per-step flags, in the order of ``FaultySensor.flags``' columns
@@ -52,13 +55,18 @@ DEFAULT_STUCK_STEPS = 10
 FAULT_STREAM = 0x5E4505
 
 
-def fault_generator(seed: int | None) -> np.random.Generator:
-    """The sensor faults' generator for ``reset(seed=seed)``: PCG64 on ``[seed, FAULT_STREAM]``
-    (fresh entropy for ``None``), independent of the plant's noise and condition streams."""
-    if seed is None:
-        return np.random.Generator(np.random.PCG64(np.random.SeedSequence()))
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([int(seed),
-                                                                       FAULT_STREAM])))
+#: the streams of one system, in the order they are spawned, and their kind
+STREAMS = (("stuck", "uniform"), ("outlier", "uniform"), ("outlier_size", "normal"),
+           ("dropout", "uniform"))
+
+
+def fault_generators(seed: int | None) -> list[np.random.Generator]:
+    """One system's four fault generators for an episode seeded ``seed`` (:data:`STREAMS`):
+    PCG64 on the children of the seed sequence ``[seed, FAULT_STREAM]`` (fresh entropy for
+    ``None``), independent of the plant's noise and condition streams."""
+    root = np.random.SeedSequence() if seed is None else \
+        np.random.SeedSequence([int(seed), FAULT_STREAM])
+    return [np.random.Generator(np.random.PCG64(child)) for child in root.spawn(len(STREAMS))]
 
 
 @dataclass(frozen=True)
@@ -144,9 +152,10 @@ def check_faults(*, n_y: int, episode_steps: int | None, dropout: Any = 0.0,
 
 
 class FaultySensor:
-    """``B`` faulty sensors in lock-step (module docstring): :meth:`read` one step's
-    measurements, :meth:`restart` some systems (a new episode: working sensor, empty
-    line, time 0). The state is plain arrays, so copies and pickles are exact."""
+    """``B`` faulty sensors in lock-step (module docstring): :meth:`seed` their random streams,
+    :meth:`read` one step's measurements (of all systems or some), :meth:`restart` some
+    systems (a new episode: working sensor, empty line, time 0). The state is plain arrays
+    and generators, so copies and pickles continue exactly."""
 
     def __init__(self, spec: FaultSpec, n_y: int, n_b: int, noise_sqrt: FloatArray,
                  hold: FloatArray) -> None:
@@ -164,6 +173,23 @@ class FaultySensor:
         #: the transmission line, a ring of ``delay + 1`` slots: readings and their flags
         self.line = np.zeros((d + 1, n_b, n_y))
         self.line_flags = np.zeros((d + 1, n_b, len(FLAGS)), dtype=bool)
+        #: each stream of :data:`STREAMS`, one generator per system
+        self.streams: dict[str, RowStreams] | None = None
+
+    def seed(self, seeds: Sequence[int | None]) -> None:
+        """New generators for the systems whose seed is given (fresh entropy for ``None`` where
+        they have none yet; a system with ``None`` keeps its streams)."""
+        if len(seeds) != self.n_b:
+            raise ValueError(f"seeds must have {self.n_b} entries; got {len(seeds)}")
+        if self.streams is None:
+            per_system = [fault_generators(s) for s in seeds]
+            self.streams = {name: RowStreams([g[j] for g in per_system], kind)
+                            for j, (name, kind) in enumerate(STREAMS)}
+            return
+        for i, s in enumerate(seeds):
+            if s is not None:
+                for (name, _), g in zip(STREAMS, fault_generators(s), strict=True):
+                    self.streams[name].replace(i, g)
 
     def restart(self, rows: NDArray[np.bool_]) -> None:
         """A new episode for the systems ``rows``: time 0, a working sensor, nothing on the
@@ -175,76 +201,57 @@ class FaultySensor:
         self.line[:, rows] = 0.0
         self.line_flags[:, rows] = False
 
-    def read(self, y: FloatArray, rngs: Sequence[np.random.Generator]
+    def read(self, y: FloatArray, rows: NDArray[np.bool_] | None = None
              ) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
-        """One step: the plant's measurements ``y (B, n_y)`` go in; out come what is delivered
-        ``(B, n_y)`` (the held reading where missing), the ``missing (B,)`` mask and the flags
-        ``(B, len(FLAGS))``. ``rngs``: one generator per system, or one for the batch."""
-        spec, n_b = self.spec, self.n_b
-        u_stuck, u_out, z_out, u_drop = self._draws(rngs)
-        k = self.k
-        flags = np.zeros((n_b, len(FLAGS)), dtype=bool)
-        reading = np.array(y, dtype=np.float64).reshape(n_b, self.n_y)
+        """One step of the systems ``rows`` (all for ``None``): their measurements ``y (n,
+        n_y)`` go in; out come what is delivered ``(n, n_y)`` (the held reading where
+        missing), the ``missing (n,)`` mask and the flags ``(n, len(FLAGS))``."""
+        if self.streams is None:
+            self.seed([None] * self.n_b)
+        assert self.streams is not None
+        spec, streams = self.spec, self.streams
+        idx = np.arange(self.n_b) if rows is None else np.flatnonzero(rows)
+        n = len(idx)
+        k = self.k[idx]
+        stuck = self.stuck[idx]
+        flags = np.zeros((n, len(FLAGS)), dtype=bool)
+        reading = np.array(y, dtype=np.float64).reshape(n, self.n_y)
         if spec.stuck_probability:
-            self.stuck = np.where(self.stuck, u_stuck >= 1.0 / spec.stuck_steps,
-                                  u_stuck < spec.stuck_probability)
-            flags[:, 1] = self.stuck
+            u = streams["stuck"].draw(rows, 1)[:, 0]
+            stuck = np.where(stuck, u >= 1.0 / spec.stuck_steps, u < spec.stuck_probability)
+            flags[:, 1] = stuck
         if spec.bias_step is not None and spec.bias_value is not None:
             biased = k >= spec.bias_step
             reading = reading + np.where(biased[:, None], spec.bias_value, 0.0)
             flags[:, 3] = biased
         if spec.outlier_probability:
-            hit = u_out < spec.outlier_probability
+            hit = streams["outlier"].draw(rows, 1)[:, 0] < spec.outlier_probability
+            size = streams["outlier_size"].draw(rows, self.n_y)
             reading = reading + np.where(hit[:, None], spec.outlier_scale * (
-                z_out @ self.noise_sqrt.T), 0.0)
+                size @ self.noise_sqrt.T), 0.0)
             flags[:, 2] = hit
-        reading = np.where(self.stuck[:, None], self.output, reading)
-        self.output = reading
+        if spec.dropout:
+            flags[:, 0] = streams["dropout"].draw(rows, 1)[:, 0] < spec.dropout
+        reading = np.where(stuck[:, None], self.output[idx], reading)
         if spec.every > 1:
             flags[:, 4] = k % spec.every != 0
-        if spec.dropout:
-            flags[:, 0] = u_drop < spec.dropout
-        slot = k % (spec.delay + 1) if spec.delay else np.zeros(n_b, dtype=np.int64)
-        rows = np.arange(n_b)
-        self.line[slot, rows] = reading
-        self.line_flags[slot, rows] = flags
+        ring = spec.delay + 1
+        slot = k % ring
+        self.line[slot, idx] = reading
+        self.line_flags[slot, idx] = flags
         due = k - spec.delay
         late = due < 0
-        out_slot = np.where(late, 0, due % (spec.delay + 1))
-        delivered = self.line[out_slot, rows].copy()
-        delivered_flags = np.where(late[:, None], False, self.line_flags[out_slot, rows])
+        out_slot = np.where(late, 0, due % ring)
+        delivered = self.line[out_slot, idx].copy()
+        delivered_flags = np.where(late[:, None], False, self.line_flags[out_slot, idx])
         delivered_flags[:, 5] = late
         missing = late | delivered_flags[:, [0, 1, 4]].any(axis=1)
-        delivered = np.where(missing[:, None], self.held, delivered)
-        self.held = delivered.copy()
-        self.k = k + 1
+        delivered = np.where(missing[:, None], self.held[idx], delivered)
+        self.stuck[idx] = stuck
+        self.output[idx] = reading
+        self.held[idx] = delivered
+        self.k[idx] = k + 1
         return delivered, missing, delivered_flags
-
-    def _draws(self, rngs: Sequence[np.random.Generator]
-               ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """This step's random numbers, in the documented order (module docstring)."""
-        spec, n_b, n_y = self.spec, self.n_b, self.n_y
-        u_stuck, u_out, u_drop = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
-        z_out = np.zeros((n_b, n_y))
-        if len(rngs) == 1 and n_b > 1:                # one generator for the batch
-            rng = rngs[0]
-            if spec.stuck_probability:
-                u_stuck = rng.random(n_b)
-            if spec.outlier_probability:
-                u_out = rng.random(n_b)
-                z_out = rng.standard_normal((n_b, n_y))
-            if spec.dropout:
-                u_drop = rng.random(n_b)
-            return u_stuck, u_out, z_out, u_drop
-        for i, rng in enumerate(rngs):                # one generator per system
-            if spec.stuck_probability:
-                u_stuck[i] = rng.random()
-            if spec.outlier_probability:
-                u_out[i] = rng.random()
-                z_out[i] = rng.standard_normal(n_y)
-            if spec.dropout:
-                u_drop[i] = rng.random()
-        return u_stuck, u_out, z_out, u_drop
 
 
 def flag_dict(flags: NDArray[np.bool_], single: bool) -> dict[str, Any]:

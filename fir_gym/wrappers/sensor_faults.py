@@ -18,11 +18,11 @@ are :mod:`.faulty_sensor`'s.
 * With ``delay=d`` the reading delivered at ``k`` is ``y[k − d]``: tell the estimator
   (``estimator_kwargs={"delay": d}``, which ``gym.make(id, sensor_faults=..., estimator=...)``
   does by default) so that it filters it as ``y[k − d]`` and predicts ahead.
-* Random draws come from the wrapper's own generator, seeded from ``reset(seed=...)``
-  (:func:`.faulty_sensor.fault_generator`), never from the plant's: the plant's noise is
-  the same with and without faults on the same seed. A native vector env with
-  ``generators="per_env"`` gets one fault generator per sub-env seeded ``seed + i``, so
-  sub-env ``i`` sees the faults of a single env reset with seed ``seed + i``.
+* Random draws come from the sensor's own generators, seeded from ``reset(seed=...)``
+  (:func:`.faulty_sensor.fault_generators`), never from the plant's: the plant's noise is
+  the same with and without faults on the same seed. :class:`VectorSensorFaults` seeds
+  sub-env ``i``'s sensor with ``seed + i`` (or the ``i``-th of a list of seeds), so sub-env
+  ``i`` sees the faults of a single env reset with seed ``seed + i``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 from gymnasium.vector import VectorEnv
 from numpy.typing import NDArray
 
-from .faulty_sensor import FaultySensor, check_faults, fault_generator, flag_dict
+from .faulty_sensor import FLAGS, FaultySensor, check_faults, flag_dict
 from .vector_estimator_observation import same_step_mode
 
 FloatArray = NDArray[np.float64]
@@ -111,13 +111,11 @@ class SensorFaults(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = self.spec_faults.delay
         sqrt, hold = _sensor_setup(plant, self.n_y)
         self.sensor = FaultySensor(self.spec_faults, self.n_y, 1, sqrt, hold)
-        self._rng: np.random.Generator | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
         y, info = self.env.reset(seed=seed, options=options)
-        if seed is not None or self._rng is None:
-            self._rng = fault_generator(seed)
+        self.sensor.seed([seed])
         self.sensor.restart(np.ones(1, dtype=bool))
         return self._read(y, info)
 
@@ -127,9 +125,8 @@ class SensorFaults(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, reward, terminated, truncated, info
 
     def _read(self, y: Any, info: dict[str, Any]) -> tuple[FloatArray, dict[str, Any]]:
-        assert self._rng is not None
         clean = np.array(y, dtype=np.float64).reshape(1, self.n_y)
-        delivered, missing, flags = self.sensor.read(clean, [self._rng])
+        delivered, missing, flags = self.sensor.read(clean)
         info = dict(info)
         info["clean_measurement"] = clean[0].copy()
         info["measurement_missing"] = bool(missing[0])
@@ -154,7 +151,6 @@ class VectorSensorFaults(gym.vector.VectorWrapper):
         self.delay = self.spec_faults.delay
         sqrt, hold = _sensor_setup(plant, self.n_y)
         self.sensor = FaultySensor(self.spec_faults, self.n_y, self.num_envs, sqrt, hold)
-        self._rngs: list[np.random.Generator] | None = None
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -186,56 +182,33 @@ class VectorSensorFaults(gym.vector.VectorWrapper):
         return obs, reward, terminated, truncated, info
 
     def _seed(self, seed: int | list[int | None] | None) -> None:
+        """Sub-env ``i``'s sensor seeded ``seed + i`` (or the ``i``-th of a list); ``None``
+        keeps each sensor's streams (fresh ones the first time)."""
         n = self.num_envs
-        per_env = getattr(self.env.unwrapped, "generators", "shared") == "per_env"
-        if not per_env:
-            if seed is not None or self._rngs is None:
-                one = None if seed is None or isinstance(seed, (list, tuple)) else int(seed)
-                self._rngs = [fault_generator(one)]
-            return
-        seeds: list[int | None] = list(seed) if isinstance(seed, (list, tuple)) else \
-            [None if seed is None else int(seed) + i for i in range(n)]
-        old = self._rngs
-        self._rngs = [fault_generator(s) if s is not None or old is None or len(old) != n
-                      else old[i] for i, s in enumerate(seeds)]
+        if isinstance(seed, (list, tuple)):
+            if len(seed) != n:
+                raise ValueError(f"seed must be an int, None or a list of {n} seeds; got "
+                                 f"{len(seed)} seeds")
+            self.sensor.seed(list(seed))
+        else:
+            self.sensor.seed([None if seed is None else int(seed) + i for i in range(n)])
 
     def _read(self, y: Any, info: dict[str, Any], rows: NDArray[np.bool_] | None = None
               ) -> tuple[FloatArray, dict[str, Any]]:
         """Read one step's measurements. With ``rows`` (same-step mode: the ended episodes'
-        last readings), only those systems advance; the others' state is kept."""
-        assert self._rngs is not None
+        last readings) only those systems read; the others' entries are their clean
+        measurement, not missing, unflagged (``final_info`` masks them out)."""
         n = self.num_envs
         clean = np.array(y, dtype=np.float64).reshape(n, self.n_y)
         if rows is None:
-            delivered, missing, flags = self.sensor.read(clean, self._rngs)
+            delivered, missing, flags = self.sensor.read(clean)
         else:
-            delivered, missing, flags = self._read_rows(clean, rows)
+            delivered, missing = clean.copy(), np.zeros(n, dtype=bool)
+            flags = np.zeros((n, len(FLAGS)), dtype=bool)
+            delivered[rows], missing[rows], flags[rows] = self.sensor.read(clean[rows], rows)
         everyone = np.ones(n, dtype=bool)
         info["clean_measurement"], info["_clean_measurement"] = clean, everyone
         info["measurement_missing"], info["_measurement_missing"] = missing, everyone
         info["sensor_faults"] = flag_dict(flags, single=False)
         info["_sensor_faults"] = everyone
         return delivered.reshape(np.shape(y)), info
-
-    def _read_rows(self, clean: FloatArray, rows: NDArray[np.bool_]
-                   ) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
-        """One step for the systems ``rows`` only, on a copy of their sensors (the caller
-        restarts them right after, so their state need not be written back); the other
-        rows draw nothing."""
-        import copy
-
-        idx = np.flatnonzero(rows)
-        sub = copy.copy(self.sensor)
-        sub.n_b = len(idx)
-        for name in ("k", "stuck", "output", "held"):
-            setattr(sub, name, getattr(self.sensor, name)[idx].copy())
-        sub.line = self.sensor.line[:, idx].copy()
-        sub.line_flags = self.sensor.line_flags[:, idx].copy()
-        assert self._rngs is not None
-        rngs = self._rngs if len(self._rngs) == 1 else [self._rngs[i] for i in idx]
-        d, m, f = sub.read(clean[idx], rngs)
-        delivered = clean.copy()
-        missing = np.zeros(self.num_envs, dtype=bool)
-        flags = np.zeros((self.num_envs, f.shape[1]), dtype=bool)
-        delivered[idx], missing[idx], flags[idx] = d, m, f
-        return delivered, missing, flags
