@@ -71,12 +71,12 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
         f"{report.get('train_seconds', 0.0) / 3600:.2f} h of training in all).", "",
         "Returns are costs (higher is better): the IQM of the per-seed mean returns on the "
         "shared evaluation episodes with a 95 % bootstrap interval over episodes and seeds. "
-        "The estimation gap is `(IQM(true) − IQM(row)) / |IQM(true)|` against the same "
-        "controller family on the true state (`lqg-true` for the LQG rows, PPO on the true "
-        "state of the same training regime for a learned row): 0 is as good as knowing the "
-        "state. NEES: the median over steps and the fraction of steps inside the 95 % χ² "
-        "band (0.95 for a consistent filter). Diverged: the fraction of episodes whose "
-        "divergence flag rose. Recovery: after a burst, the median number of steps until "
+        "The estimation gap is `(IQM(true) − IQM(row)) / |IQM(row)|`, the share of the row's "
+        "cost that the same controller family on the true state would remove (`lqg-true` "
+        "for the LQG rows, PPO on the true state of the same training regime for a learned "
+        "row): 0 is as good as knowing the state. NEES: the median over steps and the "
+        "fraction of steps inside the 95 % χ² band (0.95 for a consistent filter). "
+        "Diverged: the fraction of episodes whose divergence flag rose. Recovery: after a burst, the median number of steps until "
         "the estimation error's 10-step level is back at its pre-burst 95th percentile "
         "(`>`: censored by the episode's end). `+gate`: the estimator with its innovation "
         "gate. Learned rows name their training regime in brackets.", ""]

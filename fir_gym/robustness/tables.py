@@ -10,11 +10,13 @@ kind in each training regime — all on the same evaluation episodes. Per row
   every row: a paired design) and each row's seeds
   (:func:`fir_gym.training.stats.episode_bootstrap`);
 * ``gap`` with ``gap_low``/``gap_high`` — the **estimation gap**: the return of the same
-  controller family on the true state minus this row's, over the true-state family's
-  magnitude, ``(IQM(true) − IQM(row)) / |IQM(true)|`` (0: as good as knowing the state;
-  0.5: half again the true-state controller's cost), its interval from the same paired
-  draws; the LQG rows against ``lqg-true``, a learned row against PPO on the true state
-  of its own training regime;
+  controller family on the true state minus this row's, as a share of this row's cost,
+  ``(IQM(true) − IQM(row)) / |IQM(row)|`` — the part of the cost that knowing the state
+  would remove (0: none; 0.9: nine tenths; negative: the row does better than the
+  true-state controller), its interval from the same paired draws; the LQG rows against
+  ``lqg-true``, a learned row against PPO on the true state of its own training regime.
+  (Normalised by the row's cost, not the true-state one's: a plant whose true-state cost
+  is near zero — CarrierMotion-v0's compensation — would make the other ratio huge.)
 * ``rmse`` (per state), ``nees_median``, ``nees_in_band`` (the fraction of steps inside
   the 95 % χ² band; 0.95 for a consistent filter), ``nees_mean`` (the ANEES),
   ``diverged`` (the fraction of episodes whose divergence flag rose), ``recovery``
@@ -81,9 +83,9 @@ def cell_rows(records: Sequence[dict[str, Any]], seed: int = 0) -> list[dict[str
                                "gap_high": None}
         ref = reference_of(rs[0]["task"])
         if ref is not None and ref in draws:
-            scale = abs(centres[ref]) or 1.0
+            scale = abs(centres[name]) or 1.0
             row["gap"] = (centres[ref] - centres[name]) / scale
-            gap_draws = (draws[ref] - draws[name]) / np.maximum(np.abs(draws[ref]), 1e-300)
+            gap_draws = (draws[ref] - draws[name]) / np.maximum(np.abs(draws[name]), 1e-300)
             row["gap_low"], row["gap_high"] = percentile_interval(gap_draws)
         rmse = [r["rmse"] for r in rs if r.get("rmse") is not None]
         row["rmse"] = np.mean(rmse, axis=0).tolist() if rmse else None

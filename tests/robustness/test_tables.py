@@ -25,7 +25,8 @@ def test_gap_is_relative_to_the_same_family_on_the_true_state():
     rows = {r["name"]: r for r in cell_rows(records)}
     # one run: the IQM of the per-run means is that run's mean return
     assert rows["lqg-true"]["iqm"] == pytest.approx(np.mean(true))
-    assert rows["lqg-ekf"]["gap"] == pytest.approx(10.0 / abs(np.mean(true)))
+    # the share of the row's cost that the true state would remove
+    assert rows["lqg-ekf"]["gap"] == pytest.approx(10.0 / abs(np.mean(ekf)))
     # paired: the difference is exactly 10 in every resample, so the interval is a point
     assert rows["lqg-ekf"]["gap_low"] == pytest.approx(rows["lqg-ekf"]["gap_high"], rel=0.02)
     assert rows["lqg-true"]["gap"] is None
@@ -41,8 +42,8 @@ def test_learned_rows_are_compared_within_their_regime():
     rows = {r["name"]: r for r in cell_rows(records)}
     # IQM of three seeds (-50, -51, -52) is the trimmed mean of their means: -51
     assert rows["true (nominal)"]["iqm"] == pytest.approx(-51.0)
-    assert rows["ekf (nominal)"]["gap"] == pytest.approx(10.0 / 51.0)
-    assert rows["ekf (dr-dropout)"]["gap"] == pytest.approx(40.0 / 41.0)
+    assert rows["ekf (nominal)"]["gap"] == pytest.approx(10.0 / 61.0)
+    assert rows["ekf (dr-dropout)"]["gap"] == pytest.approx(40.0 / 81.0)
 
 
 def test_paired_difference_excludes_zero_for_a_constant_shift():
