@@ -76,8 +76,9 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
         "for the LQG rows, PPO on the true state of the same training regime for a learned "
         "row): 0 is as good as knowing the state. NEES: the median over steps and the "
         "fraction of steps inside the 95 % χ² band (0.95 for a consistent filter). "
-        "Diverged: the fraction of episodes whose divergence flag rose. Recovery: after a burst, the median number of steps until "
-        "the estimation error's 10-step level is back at its pre-burst 95th percentile "
+        "Diverged: the fraction of episodes whose divergence flag rose. Recovery: after a "
+        "burst, the median number of steps until the estimation error's 10-step level is "
+        "back at its pre-burst 95th percentile "
         "(`>`: censored by the episode's end). `+gate`: the estimator with its innovation "
         "gate. Learned rows name their training regime in brackets.", ""]
     if report.get("skipped"):
