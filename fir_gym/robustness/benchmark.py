@@ -132,13 +132,14 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     from fir_gym.code_version import code_version
     from fir_gym.scenarios.runner import SERIAL
 
-    from .report import answers, markdown, save_figures, tables_of
+    from .report import answers, details, markdown, save_figures, tables_of
 
     out = Path(out)
     chosen_plants, chosen_conditions = check_selection(plants, conditions)
     if quick and plants is None:
         chosen_plants = [p for p in QUICK.plants if p in chosen_plants]
     runner = runner or SERIAL
+    load_start = _load()
     start = time.perf_counter()
     lqg = lqg_tasks(chosen_plants, chosen_conditions, quick=quick)
     lqg_results = runner.map(run_task, lqg, desc="LQG grid")
@@ -158,7 +159,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
         "quick": quick, "code_version": code_version(),
         "machine": {"cpu": _cpu_model(), "cores": _cores(), "python": platform.python_version(),
                     "backend": getattr(runner, "backend", "serial"),
-                    "jobs": getattr(runner, "jobs", None)},
+                    "jobs": getattr(runner, "jobs", None), "load_start": load_start,
+                    "load_end": _load()},
         "lqg_seconds": lqg_seconds, "lqg_tasks": len(lqg_results),
         "learned_seconds": learned_seconds, "learned_tasks": len(learned_results),
         "learned_reused": reused,
@@ -171,6 +173,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
         "skipped": skipped(chosen_plants, chosen_conditions),
         "tables": tables}
     report["answers"] = answers(report, records)
+    report["details"] = details(report, records)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps({**report, "records": records}) + "\n")
     figures = save_figures(report, out / "figures")
@@ -186,6 +189,16 @@ def _cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown"
+
+
+def _load() -> list[float] | None:
+    """The 1, 5 and 15-minute load averages (None where the system has none)."""
+    import os
+
+    try:
+        return [round(v, 2) for v in os.getloadavg()]
+    except (AttributeError, OSError):
+        return None
 
 
 def _cores() -> int:

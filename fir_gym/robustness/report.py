@@ -10,10 +10,10 @@ from typing import Any
 
 from fir_gym.tables import format_table
 
-from .answers import answers
+from .answers import answers, details
 from .tables import cell_rows, cells
 
-__all__ = ["answers", "markdown", "rebuild", "save_figures", "tables_of"]
+__all__ = ["answers", "details", "markdown", "rebuild", "save_figures", "tables_of"]
 
 
 def tables_of(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -85,6 +85,9 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
         lines += ["Left out of the LQG grid (the estimator refuses the setting): "
                   + "; ".join(report["skipped"]) + ".", ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report.get("answers", [])] + [""]
+    if report.get("details"):
+        lines += ["FIR against Kalman, setting by setting (LQG on each family's best):", ""]
+        lines += [f"- {d}" for d in report["details"]] + [""]
     conditions = report.get("conditions", {})
     by_plant: dict[str, list[dict[str, Any]]] = {}
     for cell in report["tables"]:
@@ -233,6 +236,7 @@ def rebuild(out: str | Path) -> dict[str, Any]:
     records = saved.pop("records")
     saved["tables"] = tables_of(records)
     saved["answers"] = answers(saved, records)
+    saved["details"] = details(saved, records)
     path.write_text(json.dumps({**saved, "records": records}) + "\n")
     figures = save_figures(saved, out / "figures")
     (out / "REPORT.md").write_text(markdown(saved, figures) + "\n")
