@@ -251,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated conditions (default: all; see fir-gym list); "
                         "nominal is always run")
     p.add_argument("--seeds", type=positive_int, default=None,
-                   help="seeds per learned kind and regime (default: 3; 1 with --quick)")
+                   help="seeds per learned kind and regime (default: 5; 1 with --quick)")
     p.add_argument("--lqg-only", action="store_true",
                    help="run the LQG grid only (no training; needs no extra)")
     p.add_argument("--report-only", action="store_true",

@@ -37,8 +37,10 @@ from fir_gym.conditions import CONDITIONS, get_condition
 GATE = 0.999
 #: closed-loop episodes per (plant, estimator, gate, condition, strength) of the LQG grid
 LQG_EPISODES = 100
-#: learned controllers: seeds per (plant, kind, regime) and evaluation episodes
-SEEDS = 3
+#: learned controllers: seeds per (plant, kind, regime) and evaluation episodes (five seeds,
+#: as the controller benchmark: the whole learned grid then takes about three hours on two
+#: cores, docs/robustness.md#budget)
+SEEDS = 5
 EPISODES = 20
 #: the evaluation episodes' first seed (sub-env ``i`` plays seed ``EVAL_SEED + i``)
 EVAL_SEED = 10_000
