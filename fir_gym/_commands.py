@@ -199,7 +199,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if result.rmse is not None:
         line += "; estimation RMSE " + ", ".join(f"{v:.3g}" for v in result.rmse)
     if result.anees is not None:
-        line += f"; ANEES {result.anees:.3g}"
+        line += (f"; NEES: median {result.nees_median:.3g} of χ²'s, "
+                 f"{result.nees_in_band:.0%} of steps in its 95 % band (a consistent filter: "
+                 f"1 and 95 %), ANEES {result.anees:.3g} (1; a few steps with a nearly "
+                 "singular P blow it up)" if result.nees_median is not None
+                 else f"; ANEES {result.anees:.3g}")
     print(line)
     return 0
 
@@ -226,11 +230,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
             checkpoint_freq=args.checkpoint_freq, tensorboard=args.tensorboard,
             resume=args.resume, runner=runner)
     headers = ["observation", "mean return", "std over seeds", "IQM [95% CI]", "per seed",
-               "estimation RMSE", "ANEES"]
+               "estimation RMSE", "NEES median / χ²'s", "in χ² band", "ANEES"]
     rows = [[s["observation"], s["mean"], s["std"],
              f"{s['iqm']:.4g} [{s['iqm_low']:.4g}, {s['iqm_high']:.4g}]",
              " ".join(f"{r:.4g}" for r in s["per_seed"]),
              "—" if s["rmse"] is None else ", ".join(f"{v:.3g}" for v in s["rmse"]),
+             "—" if s.get("nees_median") is None else f"{s['nees_median']:.3g}",
+             "—" if s.get("nees_in_band") is None else f"{s['nees_in_band']:.2f}",
              "—" if s["anees"] is None else f"{s['anees']:.3g}"] for s in summary]
     print(format_table(headers, rows))
     Path(args.out, "comparison.md").write_text(format_table(headers, rows, markdown=True) + "\n")

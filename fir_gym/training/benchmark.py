@@ -147,12 +147,16 @@ def summarise(results: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
                 norm = (centres["true"] / centres[kind], *percentile_interval(ratio))
             rmse = [r["rmse"] for r in runs if r.get("rmse") is not None]
             anees = [r["anees"] for r in runs if r.get("anees") is not None]
+            medians = [r["nees_median"] for r in runs if r.get("nees_median") is not None]
+            in_band = [r["nees_in_band"] for r in runs if r.get("nees_in_band") is not None]
             table.append({
                 "kind": kind, "seeds": len(runs), "episodes": len(returns[kind][0]),
                 "iqm": centres[kind], "low": low, "high": high,
                 "normalised": norm[0], "normalised_low": norm[1], "normalised_high": norm[2],
                 "rmse": [sum(c) / len(c) for c in zip(*rmse, strict=True)] if rmse else None,
                 "anees": sum(anees) / len(anees) if anees else None,
+                "nees_median": sorted(medians)[len(medians) // 2] if medians else None,
+                "nees_in_band": sum(in_band) / len(in_band) if in_band else None,
                 "diverged_episodes": sum(r.get("diverged_episodes", 0) for r in runs),
                 "episode_returns": returns[kind]})
         tables[env_id] = table
@@ -243,11 +247,14 @@ def markdown(report: dict[str, Any]) -> str:
                     f"{r['normalised_high']:.2f}]")
             rmse = "—" if r["rmse"] is None else ", ".join(f"{v:.3g}" for v in r["rmse"])
             anees = "—" if r["anees"] is None else f"{r['anees']:.3g}"
+            median = "—" if r.get("nees_median") is None else f"{r['nees_median']:.3g}"
+            band = "—" if r.get("nees_in_band") is None else f"{r['nees_in_band']:.2f}"
             rows.append([r["kind"], r["seeds"], f"{r['iqm']:.4g} [{r['low']:.4g}, "
-                         f"{r['high']:.4g}]", norm, rmse, anees])
+                         f"{r['high']:.4g}]", norm, rmse, median, band, anees])
         lines.append(format_table(["kind", "seeds", "IQM return [95% CI]",
                                    "normalised by true [95% CI]", "estimation RMSE per state",
-                                   "ANEES"], rows, markdown=True))
+                                   "NEES median / χ²'s", "in χ² band", "ANEES"], rows,
+                                  markdown=True))
         episodes = max((r.get("episodes", 0) for r in table), default=0)
         if episodes:
             lines += ["", f"Intervals: 95 % bootstrap over the seeds and the {episodes} "

@@ -111,8 +111,10 @@ def compare_controllers(
 
     Returns one summary per kind: the mean and std over seeds of the per-seed mean
     returns, the per-seed means, their IQM with a 95 % bootstrap interval, and the
-    closed-loop estimation RMSE (per state, mean over seeds) and ANEES where the kind
-    has an estimator. ``out/results.json`` holds every job's result.
+    closed-loop estimation RMSE (per state, mean over seeds), the NEES median (as a ratio
+    to χ²'s, median over seeds), the fraction of steps in the 95 % χ² band (mean over
+    seeds) and the ANEES where the kind has an estimator. ``out/results.json`` holds every
+    job's result.
     """
     from fir_gym.scenarios.runner import SERIAL
 
@@ -174,10 +176,14 @@ def summarise(results: Sequence[dict[str, Any]], kinds: Sequence[str]) -> list[d
         low, high = percentile_interval(draws[kind])
         rmses = [r["rmse"] for r in rows if r.get("rmse") is not None]
         anees = [r["anees"] for r in rows if r.get("anees") is not None]
+        medians = [r["nees_median"] for r in rows if r.get("nees_median") is not None]
+        in_band = [r["nees_in_band"] for r in rows if r.get("nees_in_band") is not None]
         summary.append({
             "observation": kind, "mean": float(np.mean(means)), "std": float(np.std(means)),
             "per_seed": means, "iqm": iqm(means), "iqm_low": low, "iqm_high": high,
             "rmse": np.mean(rmses, axis=0).tolist() if rmses else None,
             "anees": float(np.mean(anees)) if anees else None,
+            "nees_median": float(np.median(medians)) if medians else None,
+            "nees_in_band": float(np.mean(in_band)) if in_band else None,
             "train_seconds": float(np.sum([r.get("train_seconds", 0.0) for r in rows]))})
     return summary
