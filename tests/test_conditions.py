@@ -8,6 +8,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 import fir_gym
 from fir_gym.conditions import CONDITIONS, condition_setup, get_condition
@@ -34,6 +35,11 @@ def test_every_condition_builds_on_every_plant_at_every_strength(env_id, name):
         env.reset(seed=0)
         _, reward, *_ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert np.isfinite(reward)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        checked = gym.make(env_id, **setup.plant_kwargs, sensor_faults=setup.sensor_faults)
+        check_env(checked.unwrapped if not setup.sensor_faults else checked,
+                  skip_render_check=True)
 
 
 def test_what_the_conditions_build():

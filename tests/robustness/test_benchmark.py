@@ -84,10 +84,11 @@ def test_a_rerun_reuses_learned_tasks_only_at_the_same_code_version(quick, monke
     assert not learned_grid.run_learned_task(task).get("reused")
 
 
-def test_the_lqg_grid_gives_the_same_numbers_serially_and_on_joblib():
-    tasks = lqg_tasks(["fir_gym/Orbit-v0"], ["nominal", "dropout"], quick=True)[:6]
+@pytest.mark.parametrize("backend", ["joblib", "dask"])
+def test_the_lqg_grid_gives_the_same_numbers_on_every_backend(backend):
+    tasks = lqg_tasks(["fir_gym/Orbit-v0"], ["nominal", "dropout", "mismatch"], quick=True)[:8]
     serial = [run_task(t) for t in tasks]
-    with Runner("joblib", jobs=2) as runner:
+    with Runner(backend, jobs=2) as runner:
         parallel = runner.map(run_task, tasks)
     assert serial == parallel
 

@@ -12,9 +12,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from plant_cases import applicable
 
 import fir_gym
-from fir_gym.estimators import make_estimator
 from fir_gym.wrappers import (
     EstimatorObservation,
     SensorFaults,
@@ -133,17 +133,31 @@ def test_stuck_sensor_is_detected_and_lasts_as_documented():
                                                          / len(runs))
 
 
-def test_missing_readings_reach_the_estimator_as_missing():
+CASES = [(env_id, name) for env_id, name in applicable() if name != "fir-smoother"]
+
+
+@pytest.mark.parametrize(("env_id", "name"), CASES)
+def test_full_dropout_makes_every_filter_predict_only(env_id, name):
     """With every reading dropped, the estimator in the loop equals a twin stepped with no
-    measurement at all (predictions only), step by step."""
-    env = EstimatorObservation(SensorFaults(plant(), dropout=1.0), "ekf")
-    twin = make_estimator("ekf", env.unwrapped.model, x0=env.estimator.x, P0=env.estimator.P)
+    measurement at all (predictions only), step by step — on every plant and filter; the
+    recursive FIR filter, which needs every measurement, refuses instead."""
+    env = EstimatorObservation(SensorFaults(plant(env_id), dropout=1.0), name)
+    estimator = env.get_wrapper_attr("estimator")
+    twin = copy.deepcopy(estimator)
+    if not estimator.accepts_missing:
+        with pytest.raises(ValueError, match="needs every measurement"):
+            env.reset(seed=0)
+        return
     x_hat, info = env.reset(seed=0)
     np.testing.assert_array_equal(x_hat, twin.step(None))
     for _ in range(10):
-        x_hat, _, _, _, info = env.step(np.array([0.1], dtype=np.float32))
+        x_hat, _, term, trunc, info = env.step(np.zeros(env.action_space.shape,
+                                                        dtype=np.float32))
         np.testing.assert_array_equal(x_hat, twin.step(None, info["action"]))
-    np.testing.assert_array_equal(env.estimator.P, twin.P)
+        if term or trunc:
+            break
+    if estimator.provides_covariance:
+        np.testing.assert_array_equal(estimator.P, twin.P)
 
 
 def test_dropped_readings_in_a_vector_env_are_masked_per_system():
