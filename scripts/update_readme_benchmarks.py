@@ -26,7 +26,8 @@ def _run_line(results: dict) -> str:
     if m.get("load_start") and m.get("load_end"):
         load = (f", load average {', '.join(f'{v:g}' for v in m['load_start'])} at the start "
                 f"and {', '.join(f'{v:g}' for v in m['load_end'])} at the end")
-    return (f"`fir-gym benchmark-robustness --backend {m['backend']} --jobs {m['jobs']}` "
+    jobs = f" --jobs {m['jobs']}" if m.get("jobs") else ""
+    return (f"`fir-gym benchmark-robustness --backend {m['backend']}{jobs}` "
             f"(code version `{results['code_version']}`) on {m['cpu']}, {m['cores']} cores"
             f"{load}: the LQG grid, {results['lqg_tasks']} cells of 100 episodes, in "
             f"{results['lqg_seconds'] / 60:.1f} min; the learned grid, "

@@ -109,3 +109,32 @@ def test_lqg_only_runs_without_training(tmp_path):
 ])
 def test_bad_selections_are_one_line(tmp_path, capsys, argv, needle):
     one_line(capsys, ["benchmark-robustness", "--out", str(tmp_path / "x"), *argv], needle)
+
+
+def test_the_readme_sections_are_computed_from_the_results(quick, tmp_path):
+    """The README's two benchmark sections are written from results.json: every return they
+    print is one of the results' IQMs, and the markers keep their place."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    script = Path(__file__).parents[2] / "scripts" / "update_readme_benchmarks.py"
+    spec = importlib.util.spec_from_file_location("update_readme_benchmarks", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    results = json.loads((quick / "results.json").read_text())
+    readme = tmp_path / "README.md"
+    readme.write_text("top\n<!-- robustness:start -->\nold\n<!-- robustness:end -->\nmiddle\n"
+                      "<!-- benchmark:start -->\nold\n<!-- benchmark:end -->\nend\n")
+    text = module.replace_block(readme.read_text(), "robustness",
+                                module.robustness_block(results))
+    text = module.replace_block(text, "benchmark", module.controllers_block(results))
+    assert text.startswith("top\n<!-- robustness:start -->\n**Benchmark: robustness")
+    assert "old" not in text and text.endswith("<!-- benchmark:end -->\nend\n")
+    iqms = {f"{r['iqm']:.3g}" for c in results["tables"] for r in c["rows"]}
+    table = "\n".join(line for line in text.splitlines()
+                      if line.startswith("| ") and not line.startswith("| plant"))
+    printed = re.findall(r"(?<![\w.])(-?\d+(?:\.\d+)?(?:e[+-]?\d+)?) \(", table)
+    assert printed and set(printed) <= iqms
+    for answer in results["answers"]:
+        assert answer in text
