@@ -1,8 +1,11 @@
 """The ``fir-gym`` argument parser: every option with its help text and its default.
 
-Building the parser imports nothing heavy (the commands import what they need when
-they run), so ``fir-gym --help`` and every ``fir-gym CMD --help`` answer at once. A
-parse error is one line, ``fir-gym CMD: error: ...``, and exit status 2.
+Building the parser imports nothing heavy, and no command: the parsed namespace names its
+subcommand (``args.command``), and :func:`fir_gym.cli.main` runs it from
+:data:`fir_gym._commands.COMMANDS`. So ``fir-gym --help`` and every ``fir-gym CMD --help``
+answer at once, and a command's own parser (``fir-gym speed``'s) can build on
+:class:`Parser` without an import circle (docs/architecture.md#import-graph). A parse error
+is one line, ``fir-gym CMD: error: ...``, and exit status 2.
 """
 
 from __future__ import annotations
@@ -13,7 +16,6 @@ import sys
 from typing import Any, NoReturn
 
 from . import __version__
-from . import _commands as commands
 
 #: what ``reproduce --paper`` accepts
 PAPERS = ("000", "001", "002", "003", "004", "sweeps")
@@ -152,7 +154,6 @@ def build_parser() -> argparse.ArgumentParser:
         return p
 
     p = command("list", "list environments and estimators")
-    p.set_defaults(func=commands.cmd_list)
 
     p = command("reproduce", "reproduce every experiment of the papers, side by side with "
                              "the paper, and the sweeps beyond them")
@@ -168,7 +169,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Monte Carlo runs per experiment (default: each scenario's own)")
     _add_runner_options(p, "Monte Carlo runs")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.set_defaults(func=commands.cmd_reproduce)
 
     rl = 'Needs the rl extra: pip install torch==2.13.0 && pip install "fir-gym[rl]".'
     p = command("train", "train a controller with stable-baselines3",
@@ -182,7 +182,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hyperparams", default=None, metavar="YAML",
                    help="an RL Zoo hyperparameter file (default: the shipped one)")
     _add_training_options(p)
-    p.set_defaults(func=commands.cmd_train)
 
     p = command("evaluate", "evaluate a trained controller, or LQG/PID",
                 description="Evaluate a run folder of `fir-gym train`, or a classical "
@@ -203,7 +202,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--best", action="store_true",
                    help="evaluate the evaluation callback's best model (RUN/best)")
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
-    p.set_defaults(func=commands.cmd_evaluate)
 
     p = command("compare-controllers",
                 "train and compare controllers seeing different observations",
@@ -216,7 +214,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=positive_int, default=3, help="seeds 0..N-1 per kind")
     _add_training_options(p)
     _add_runner_options(p, "(kind, seed) jobs")
-    p.set_defaults(func=commands.cmd_compare)
 
     p = command("benchmark-controllers",
                 "controllers on estimates: the five plants x eight kinds x 5 seeds (about "
@@ -230,7 +227,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of the plants (default: all five)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_runner_options(p, "(plant, kind, seed) jobs")
-    p.set_defaults(func=commands.cmd_benchmark)
 
     p = command("benchmark-robustness",
                 "which estimator belongs in a closed loop when the model is wrong and the "
@@ -258,7 +254,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rebuild OUT/REPORT.md and the figures from OUT/results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_runner_options(p, "tasks")
-    p.set_defaults(func=commands.cmd_robustness)
 
     p = command("watch", "record one episode as a GIF or MP4, the estimate drawn over the plant",
                 description="Record one episode with the estimate (and its 2σ region) and "
@@ -289,7 +284,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: none)")
     p.add_argument("--out", required=True,
                    help="the video file: FILE.gif or FILE.mp4 (required)")
-    p.set_defaults(func=commands.cmd_watch)
 
     for name in ("speed", "bench"):
         # parsed by the speed benchmark itself (fir_gym.cli.main hands it every argument);

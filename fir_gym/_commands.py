@@ -1,4 +1,5 @@
-"""What each ``fir-gym`` subcommand does (the parser and the error handling: :mod:`.cli`).
+"""What each ``fir-gym`` subcommand does (the parser: :mod:`._cli_parser`; the dispatch and
+the error handling: :mod:`.cli`).
 
 Every heavy import (Gymnasium's plants, the estimators and numba, stable-baselines3 and
 PyTorch, Dask, imageio) happens inside the command that needs it, so ``fir-gym --help``
@@ -14,7 +15,7 @@ import importlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -298,3 +299,12 @@ def cmd_watch(args: argparse.Namespace) -> int:
     print(f"wrote {rec.path}: {rec.frames} frames at {rec.fps:g} fps, {rec.steps} steps, "
           f"return {rec.episode_return:.4g}")
     return 0
+
+
+#: the subcommand a parsed command line names -> the function that runs it (``speed`` and
+#: ``bench`` hand their raw arguments to :func:`cmd_speed`; :func:`fir_gym.cli.main`)
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "list": cmd_list, "reproduce": cmd_reproduce, "train": cmd_train,
+    "evaluate": cmd_evaluate, "compare-controllers": cmd_compare,
+    "benchmark-controllers": cmd_benchmark, "benchmark-robustness": cmd_robustness,
+    "watch": cmd_watch}

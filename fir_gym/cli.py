@@ -93,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         args = build_parser().parse_args(argv)
         command = args.command
-        run = lambda: args.func(args)                     # noqa: E731
+        run = lambda: commands.COMMANDS[command](args)    # noqa: E731
     from threadpoolctl import threadpool_limits
 
     try:

@@ -34,6 +34,19 @@ def test_list_names_every_environment(capsys):
     assert all(env_id in out for env_id in fir_gym.ENV_IDS)
 
 
+def test_every_subcommand_of_the_parser_runs_a_command():
+    """The parser names a subcommand and imports no command; cli.main runs it from
+    _commands.COMMANDS (speed and bench hand their raw arguments to cmd_speed)."""
+    import argparse
+
+    from fir_gym._commands import COMMANDS
+    from fir_gym.cli import SPEED_COMMANDS, build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) - set(SPEED_COMMANDS) == set(COMMANDS)
+
+
 def test_unknown_subcommand_is_an_argparse_error():
     with pytest.raises(SystemExit) as exc:
         main(["nonsense"])
