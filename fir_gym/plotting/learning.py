@@ -1,4 +1,9 @@
-"""Learning curves of controllers trained with ``fir-gym train`` / ``compare-controllers``."""
+"""Learning curves of controllers trained with ``fir-gym train`` / ``compare-controllers``.
+
+The curves are read from the runs' monitor files by :mod:`.monitor` (numpy only): drawing
+them needs neither stable-baselines3 nor :mod:`fir_gym.training`, which draws its figures
+with this function (docs/architecture.md#import-graph).
+"""
 
 from __future__ import annotations
 
@@ -9,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ._axes import axes_for
+from .monitor import learning_curve
 
 RunDirs = str | Path | Sequence[str | Path]
 
@@ -22,16 +28,13 @@ def plot_learning_curves(runs: RunDirs | Mapping[str, RunDirs], *, bins: int = 2
             curve each), or a mapping ``label → folder(s)``: the folders of one label
             (its seeds) are averaged — a bin no episode ended in takes its neighbours'
             value — with a band of ± one standard deviation across them.
-        bins: timestep bins of each curve (:func:`fir_gym.training.learning_curve`).
+        bins: timestep bins of each curve (:func:`fir_gym.plotting.monitor.learning_curve`,
+            also :func:`fir_gym.training.learning_curve`).
         ax: the Axes to draw on (default: a new figure).
 
     A run with no finished training episode has no curve and is listed as such in
     the legend's place. Returns the :class:`matplotlib.figure.Figure` drawn on.
     """
-    # imported here: fir_gym.training loads stable-baselines3 and PyTorch (the rl extra),
-    # which the other plots, and fir-gym reproduce's figures, do without
-    from fir_gym.training import learning_curve
-
     groups = _groups(runs)
     fig, (panel,) = axes_for(1, ax, height=3.5)
     empty = []
