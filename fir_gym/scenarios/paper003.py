@@ -17,92 +17,58 @@ PendulumSlider-v0's ``dynamics``, docs/papers.md#003-printed-equations). Named c
 (10 N, 1 Hz, θ₀ = 0.5 rad, 5 s, scored from 0.5 s) and the printed equations on both;
 :data:`SWEEP` varies amplitude, frequency, initial angle and duration. Each task is a
 chunk of runs of one cell — episodes, the batched UKF/EKF, the LSM — reduced to per-run
-sums; :mod:`.paper003_report` writes the report.
+sums; :mod:`.paper003_report` writes the report. The paper's numbers, the truth and the
+cells are :mod:`.paper003_setup` (re-exported here).
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from ..estimators import ExtendedKalmanFilter, UnscentedKalmanFilter, augment
 from ._montecarlo import chunks
+from .paper003_setup import (
+    CELLS,
+    CLAIM_SHARE,
+    CONVERGED_BY,
+    DEFAULT,
+    DIFFERENCES,
+    DT,
+    ENV_ID,
+    HALF,
+    LIVELY,
+    LSM_WINDOWS,
+    PAPER_TABLE4,
+    PAPER_TABLE5,
+    PARAMS,
+    QUIET,
+    SCORINGS,
+    SWEEP_AXES,
+    TRUE,
+    WITHIN,
+    Cell,
+    make_env,
+    settle_index,
+)
 from .plan import Stage, Task, run_plan
-from .prose import Printed, say
 from .report import Report
 from .runner import Runner
 
-ENV_ID = "fir_gym/PendulumSlider-v0"
-#: Table 4: state RMSE of the UKF estimate and of the measurement
-PAPER_TABLE4 = {k: tuple(map(Printed, v)) for k, v in {
-    "x": ("0.0010", "0.003"), "x_dot": ("0.0063", "0.0302"), "theta": ("0.0040", "0.0294"),
-    "theta_dot": ("0.0361", "0.3008")}.items()}
-#: Table 5: parameter errors (UKF: RMSE; LSM: error of the estimate)
-PAPER_TABLE5 = {"UKF": {"mu": Printed("0.0044"), "M0": Printed("0.0010")},
-                "LSM": {"mu": Printed("-0.0119"), "M0": Printed("-0.7251")}}
-TRUE = {"mu": 0.2, "M0": 0.2}
-DT = 1e-3
-#: the paper's claims (§5, §6): within this share of the truth, within this time
-WITHIN, CONVERGED_BY = 0.03, 0.1
-#: a claim about one run holds when this share of the runs meets it
-CLAIM_SHARE = 0.95
-#: the time of the parameter snapshot of the tests and figures (s)
-HALF = 0.5
-DIFFERENCES = ("backward", "forward", "central")
-PARAMS = ("mu", "M0")
-#: the readings of the LSM's regression window (docs/papers.md#003-lsm-window): the whole record, or
-#: only the Table 5 window (the samples from the cell's Table 5 scoring start ``t5`` on)
-LSM_WINDOWS = ("whole", "window")
+# the setup (.paper003_setup) is re-exported: paper003.CELLS, paper003.Cell, ...
+__all__ = ["CELLS", "CHUNK", "CLAIM_SHARE", "CONVERGED_BY", "DEFAULT", "DIFFERENCES", "DT",
+           "ENV_ID", "HALF", "LIVELY", "LSM_WINDOWS", "PAPER_TABLE4", "PAPER_TABLE5", "PARAMS",
+           "QUIET", "RUNS", "SCORINGS", "SWEEP_AXES", "SWEEP_GROUP", "SWEEP_RUNS", "TRUE",
+           "WITHIN", "WITH_EKF", "Cell", "Episodes", "cell_input", "cell_task", "episode",
+           "joint_estimates", "lsm_estimates", "lsm_first_sample", "lsm_starts", "make_env",
+           "paper_input", "plan", "plot", "rate_mean_square", "replace_episodes", "run",
+           "runs_for", "settle_index", "simulate", "sweep"]
 
-
-@dataclass(frozen=True)
-class Cell:
-    """One experiment: input ``amplitude · sin 2π·frequency·t`` N from ``[x_rest, 0, θ₀, 0]`` for
-    ``seconds``, under ``dynamics``; Table 4 scored from ``t4``, Table 5 from ``t5`` seconds."""
-
-    amplitude: float = 5.0
-    frequency: float = 1.0
-    theta0: float = 0.0
-    seconds: float = 1.0
-    dynamics: str = "physical"
-    t4: float = 0.0
-    t5: float = 0.1
-
-    @property
-    def steps(self) -> int:
-        return round(self.seconds / DT)
-
-    @property
-    def label(self) -> str:
-        """``A5·f1·θ0·T1`` (and the equations when printed)."""
-        base = say("A{a:g}·f{f:g}·θ{t:g}·T{s:g}", a=self.amplitude, f=self.frequency,
-                   t=self.theta0, s=self.seconds)
-        return base if self.dynamics == "physical" else say(
-            "{d}·{b}", d=self.dynamics.removeprefix("printed-"), b=base)
-
-
-QUIET = Cell()
-LIVELY = Cell(amplitude=10.0, theta0=0.5, seconds=5.0, t4=0.5, t5=0.5)
-#: the named cells of the summary: (name, cell)
-CELLS = {"quiet": QUIET, "lively": LIVELY,
-         "eq15·quiet": replace(QUIET, dynamics="printed-eq15"),
-         "eq15·lively": replace(LIVELY, dynamics="printed-eq15"),
-         "eq5·quiet": replace(QUIET, dynamics="printed-eq5"),
-         "eq5·lively": replace(LIVELY, dynamics="printed-eq5")}
-DEFAULT = "quiet"
-#: the sensitivity sweep (physical equations), full and quick
-SWEEP_AXES: dict[bool, dict[str, tuple[float, ...]]] = {
-    False: {"amplitude": (5.0, 10.0), "frequency": (1.0, 2.0), "theta0": (0.0, 0.5),
-            "seconds": (1.0, 5.0)},
-    True: {"amplitude": (5.0, 10.0), "frequency": (1.0,), "theta0": (0.0, 0.5),
-           "seconds": (1.0,)}}
-#: the two scorings of every sweep cell: (t4, t5)
-SCORINGS = ((0.0, 0.1), (0.5, 0.5))
+#: Monte Carlo runs per second of a named cell, and per sweep cell (full, quick)
 RUNS = {False: 50, True: 5}
 SWEEP_RUNS = {False: 10, True: 3}
 CHUNK = 10
@@ -129,11 +95,6 @@ class Episodes:
     force_max: float
     model: Any           # the env's parametric model (the filters' belief)
     dynamics: Any        # the ODE with the same nominal parameters (for least squares)
-
-
-def make_env(cell: Cell) -> Any:
-    """The cell's PendulumSlider-v0 (unwrapped, no time limit)."""
-    return gym.make(ENV_ID, max_episode_steps=None, dynamics=cell.dynamics).unwrapped
 
 
 def cell_input(k: np.ndarray | int, cell: Cell = QUIET, force_max: float = 10.0) -> np.ndarray:
@@ -229,16 +190,6 @@ def rate_mean_square(X: np.ndarray, start: float = 0.0) -> float:
     """``E[θ̇²]`` of the true states ``(K+1, B, 4)`` over the samples ``t_k ≥ start`` (from
     sample 1: the first backward-difference equation), NaN after a run left the rail."""
     return float(np.nanmean(X[max(round(start / DT), 1):, :, 3] ** 2))
-
-
-def settle_index(err: np.ndarray, within: float = WITHIN) -> np.ndarray:
-    """Per run and parameter, the first step from which ``|err| ≤ within·truth`` for good
-    (``K+1`` if never); ``err`` is ``(K+1, B, 2)``."""
-    truth = np.array([TRUE[p] for p in PARAMS])
-    outside = ~(np.abs(err) <= within * truth)
-    K1 = err.shape[0]
-    last = K1 - 1 - np.argmax(outside[::-1], axis=0)            # last step outside
-    return np.where(outside.any(axis=0), last + 1, 0).astype(int)
 
 
 def runs_for(cell: Cell, runs: int) -> int:

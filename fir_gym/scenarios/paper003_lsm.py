@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .paper003 import (
+from .paper003_setup import (
     DEFAULT,
     DT,
     LSM_WINDOWS,

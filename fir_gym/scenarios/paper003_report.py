@@ -5,7 +5,7 @@ Monte Carlo standard errors: an RMSE's by the delta method over the runs' mean s
 a mean's the runs' standard deviation over √M. The claims ("the estimated parameters
 are within 3 %", "they converge within 100 samples") are judged on the Monte Carlo mean
 *and* per run (the paper shows one run): per run, the claim holds when at least
-:data:`~.paper003.CLAIM_SHARE` of the runs meet it (docs/papers.md#003-claims). The LSM's
+:data:`~.paper003_setup.CLAIM_SHARE` of the runs meet it (docs/papers.md#003-claims). The LSM's
 rows under both readings of its regression window, and its bias law: :mod:`.paper003_lsm`
 (docs/papers.md#003-lsm).
 """
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import paper003_lsm as lsm
-from .paper003 import (
+from .paper003_setup import (
     CLAIM_SHARE,
     CONVERGED_BY,
     DEFAULT,
