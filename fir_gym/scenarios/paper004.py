@@ -18,7 +18,8 @@ samples it (T = 0.1 s, exact discretisation, R = V/T = 10; no input):
   growth the paper's recursion has in general.
 
 The comparison the paper leaves as future work (FIR vs Kalman under paper 001's
-model uncertainty) is :mod:`.paper004_carrier`.
+model uncertainty) is :mod:`.paper004_carrier`. The examples and the checks' settings are
+:mod:`.paper004_setup` (re-exported here).
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from fir_gym.estimators import (
@@ -40,31 +40,24 @@ from fir_gym.estimators import (
 from . import paper004_cost
 from ._montecarlo import EpisodeTask, run_filter, simulate_episode, stack_episodes, task_seed
 from .paper004_carrier import CORNERS, comparison_plan, corner_label, summary
+from .paper004_setup import (
+    ENV_ID,
+    EXAMPLES,
+    GAIN_HORIZONS,
+    GROWN,
+    PRIOR_SCALES,
+    RECURSIVE_HORIZON,
+    WINDOW_STARTS,
+    example_model,
+)
 from .plan import Stage, Task, gather, run_plan
-from .prose import say
 from .report import Report
 from .runner import Runner
 
-ENV_ID = "fir_gym/CarrierMotion-v0"
-#: the two documented examples: CarrierMotion-v0 options and the number of steps simulated
-EXAMPLES = {say("carrier, T = {t:g} s (paper 001)", t=0.1): ({"sample_period": 0.1}, 3000),
-            say("carrier, T = {t:g} s, v = {v:g}", t=1.0, v=0.01): (
-                {"sample_period": 1.0, "v": 0.01}, 300)}
-GAIN_HORIZONS = {False: (3, 11, 51), True: (3, 11)}
-RECURSIVE_HORIZON = 11
-WINDOW_STARTS = (0, 100, 1000, 3000)
-PRIOR_SCALES = (1e2, 1e4, 1e6)
-#: a deviation counts as "grown" once it exceeds this (relative to the estimates' size)
-GROWN = 1e-6
-
-
-def example_model(**env_kwargs: Any) -> LinearModel:
-    """CarrierMotion-v0's nominal model without its (zero) input matrix: paper 004's (2.1)."""
-    env = gym.make(ENV_ID, **env_kwargs)
-    m: Any = env.unwrapped.model                        # type: ignore[attr-defined]
-    env.close()
-    return LinearModel(A=m.A, C=m.C, Q=m.Q, R=m.R, G=m.G, dt=m.dt, name="carrier (paper 001)")
-
+# the setup (.paper004_setup) is re-exported: paper004.EXAMPLES, paper004.example_model, ...
+__all__ = ["ENV_ID", "EXAMPLES", "GAIN_HORIZONS", "GROWN", "PRIOR_SCALES", "RECURSIVE_HORIZON",
+           "WINDOW_STARTS", "algebra_task", "example_model", "example_task", "gain_paths",
+           "plan", "plot", "recursion_check", "run", "time_invariance"]
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))

@@ -14,8 +14,8 @@ from fir_gym.estimators import fir_gains
 from fir_gym.estimators.recursive_fir import AUTO_GROWTH
 
 from . import paper004_cost as cost
-from .paper004 import EXAMPLES, GROWN, RECURSIVE_HORIZON, example_model
 from .paper004_carrier import CORNERS, SCORE_FROM, corner_label, summary, table_rows
+from .paper004_setup import EXAMPLES, GROWN, RECURSIVE_HORIZON, example_model
 from .prose import join, say
 from .report import Report, claim
 
