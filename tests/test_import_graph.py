@@ -37,27 +37,38 @@ import os
 from pathlib import Path
 
 PACKAGE = "fir_gym"
+#: the sub-packages pyproject's package-dir maps from elsewhere (docs/architecture.md#package-dir):
+#: inside the installed fir_gym folder, and walked on their own too for an install that maps
+#: them through an import hook
+MAPPED = ("fir_gym.envs", "fir_gym.estimators")
 
 
 def installed_modules() -> dict[str, Path]:
     """Every module of the installed package: dotted name -> source file."""
-    spec = importlib.util.find_spec(PACKAGE)
-    assert spec is not None and spec.submodule_search_locations
     modules: dict[str, Path] = {}
-    for location in spec.submodule_search_locations:
-        top = Path(location)
-        # the strict editable install is a tree of links: follow linked folders too
-        for folder, dirs, files in os.walk(top, followlinks=True):
-            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
-            parts = [PACKAGE, *Path(folder).relative_to(top).parts]
-            if "__init__.py" not in files:
-                dirs[:] = []          # not a package: nothing below it is importable
-                continue
-            for name in sorted(files):
-                if name.endswith(".py"):
-                    stem = name[:-3]
-                    dotted = ".".join(parts if stem == "__init__" else [*parts, stem])
-                    modules[dotted] = Path(folder) / name
+    for package in (PACKAGE, *MAPPED):
+        spec = importlib.util.find_spec(package)
+        assert spec is not None and spec.submodule_search_locations, package
+        for location in spec.submodule_search_locations:
+            modules.update(_walk(package, Path(location)))
+    return modules
+
+
+def _walk(package: str, top: Path) -> dict[str, Path]:
+    """The modules of ``package`` under its folder ``top`` (sub-packages are folders with an
+    ``__init__.py``; the strict editable install is a tree of links, so links are followed)."""
+    modules: dict[str, Path] = {}
+    for folder, dirs, files in os.walk(top, followlinks=True):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        if "__init__.py" not in files:
+            dirs[:] = []              # not a package: nothing below it is importable
+            continue
+        parts = [package, *Path(folder).relative_to(top).parts]
+        for name in sorted(files):
+            if name.endswith(".py"):
+                stem = name[:-3]
+                dotted = ".".join(parts if stem == "__init__" else [*parts, stem])
+                modules[dotted] = Path(folder) / name
     return modules
 
 
