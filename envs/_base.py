@@ -1,7 +1,9 @@
 """Machinery shared by the paper plants: actions, noise, parameters, the model.
 
 Each plant subclasses :class:`PlantEnv` and supplies its transition, its
-measurement function, its reward, its physical domain and a drawing. The base
+measurement function, its reward, its physical domain and a drawing, and, for the
+classical controllers, its design point (:meth:`PlantEnv.design_point`: the operating
+point and the weights of its reward, a :class:`~fir_gym.envs.DesignPoint`). The base
 class does what must be identical everywhere:
 
 * **Actions.** The action space is ``Box(-1, 1, (n_u,), float32)``; the plant
@@ -96,6 +98,7 @@ from ._conditions import (
     draw_params,
     stretch,
 )
+from ._design import DesignPoint
 from ._inputs import real_array, reset_options
 from ._overlay import EstimateDrawing
 
@@ -290,6 +293,25 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
             raise ValueError(f"unknown parameter(s) {unknown}; known parameters are "
                              f"{sorted(self.params)}")
         return self._build_model({**self.nominal_params, **overrides})
+
+    def design_point(self) -> DesignPoint:
+        """The plant's operating point, reward weights and PID tuning (a fresh record).
+
+        What the classical controllers (:class:`~fir_gym.controllers.LQGController`,
+        :class:`~fir_gym.controllers.PIDController`) design on: the LQR of
+        :attr:`model` linearised at ``(x, u)`` with the weights ``M`` of the reward.
+        Computed from :attr:`nominal_params`, never the truth. The base class knows
+        neither a plant's operating point nor how its reward weighs the state, so a
+        plant that supports the LQG baseline overrides this (each paper plant does, in
+        its own file); the others raise ``NotImplementedError`` naming the plant.
+        """
+        name = type(self).__name__
+        raise NotImplementedError(
+            f"{name} publishes no design point, so the classical controllers (LQG, PID) "
+            f"cannot be designed for it: implement {name}.design_point(self) -> "
+            "fir_gym.envs.DesignPoint (its operating point x, u, a fixed point of the "
+            "nominal model, and the quadratic weights M of its reward; "
+            "docs/architecture.md#design-point)")
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(

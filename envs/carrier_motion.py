@@ -15,6 +15,7 @@ from fir_gym.estimators.continuous import ContinuousModel
 
 from . import _draw
 from ._base import PlantEnv, psd_sqrt, saturated_cost
+from ._design import DesignPoint
 
 PAPER_A21 = -0.36
 PAPER_A22 = -0.06
@@ -249,6 +250,22 @@ class CarrierMotionEnv(PlantEnv):
         A_d, Q_d, C, R_d = carrier_discrete(params)
         return LinearModel(A=A_d, C=C, Q=Q_d, R=R_d, B=np.zeros((2, 1)),
                            dt=params["sample_period"], name="CarrierMotion")
+
+    def design_point(self) -> DesignPoint:
+        """``x = 0``, ``c = 0``: compensation, where the action predicts the deck.
+
+        The action does not move the deck (the model's input matrix is zero), so the
+        operating point is the sea's rest with the platform centred, and the cost is the
+        reward's, ``((x1[k+1] − c_max a) / σ1)²``: its cross term between ``x1[k+1]`` and
+        ``a`` is all the LQR sees, and its gain is the certainty-equivalent one-step
+        predictor ``c = C A x̂ / c_max`` of paper 001's nominal model. No measured
+        quantity is held (``output=None``): PID does not apply.
+        """
+        c = self.c_max / self._sigma1
+        w = np.array([1.0 / self._sigma1, 0.0, -c])       # z -> (x1[k+1] - c_max a) / σ1
+        return DesignPoint(x=np.zeros(2), u=np.zeros(1), M=np.outer(w, w), states=(0, 1),
+                           note="compensation: the action predicts the deck, it does not "
+                                "move it")
 
     def _draw(self, canvas: _draw.Canvas) -> None:
         s = 3.0 * self._sigma1

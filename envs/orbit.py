@@ -14,6 +14,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, psd_sqrt, saturated_cost
 from ._conditions import column, entry, per_system
+from ._design import DesignPoint
 from ._interval_kernels import orbit_interval
 
 TRUE_MU = 19.92244165
@@ -270,6 +271,22 @@ class OrbitEnv(PlantEnv):
         dt = params["euler_dt"] * params["substeps"]
         return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, fF=dyn.f_and_F, Q=params["Q"],
                                R=params["R"], dt=dt, n_u=1, name=f"Orbit(mu={params['mu']:g})")
+
+    def design_point(self) -> DesignPoint:
+        """Hover at ``r = r_ref``, ``v = 0`` with the nominal thrust ``μ / r_ref²``.
+
+        The input is that thrust in units of ``thrust_max`` (the nominal μ's, what the
+        model believes: the LQG's operating point is a fixed point of the model, eq (27)
+        of paper 000 with the thrust added). The weights are the reward's,
+        ``(r[k+1] − r_ref)² + 0.01 a²``; PID holds the measured radius at ``r_ref``.
+        """
+        p = self.nominal_params
+        hover = p["mu"] / (self.r_ref ** 2 * p["thrust_max"])
+        M = np.diag([1.0, 0.0, 0.01])
+        return DesignPoint(x=np.array([self.r_ref, 0.0]), u=np.array([hover]), M=M,
+                           states=(0, 1), output=0, setpoint=self.r_ref,
+                           pid={"kp": 2.0, "ki": 0.5, "kd": 2.0},
+                           note="hover at r_ref with the nominal μ's thrust")
 
     def _draw(self, canvas: _draw.Canvas) -> None:
         r = float(self.state[0])

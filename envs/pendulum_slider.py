@@ -15,6 +15,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, po
 
 from ._base import PlantEnv, psd_sqrt, saturated_cost, state_failure
 from ._conditions import per_system
+from ._design import DesignPoint
 from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
 from ._overlay import CameraView
 from .pendulum_slider_dynamics import (
@@ -554,6 +555,22 @@ class PendulumSliderEnv(PlantEnv):
         name = (f"PendulumSlider({params['friction']})" if params["dynamics"] == "physical"
                 else f"PendulumSlider({params['dynamics']})")
         return self._make_dynamics(params).model(Q=params["Q"], R=params["R"], name=name)
+
+    def design_point(self) -> DesignPoint:
+        """The slider at the *nominal* rest position, the pendulum hanging, ``u = 0``.
+
+        The rest position ``l0 − μ (m1 + m2) g / 2k`` of the nominal parameters (with the
+        paper's friction push; ``l0`` otherwise) is the model's fixed point, paper 003's
+        equations of motion. The weights are the reward's per-step cost,
+        ``θ² + 0.1 θ̇² + 100 (x − x_rest)² + 0.01 a²`` (its constant time scale does not
+        change the LQR's gain); PID holds the measured slider position at that rest.
+        """
+        x_rest = self._rest_position(self.nominal_params)
+        M = np.diag([100.0, 0.0, 1.0, 0.1, 0.01])
+        return DesignPoint(x=np.array([x_rest, 0.0, 0.0, 0.0]), u=np.zeros(1), M=M,
+                           states=(0, 1, 2, 3), output=0, setpoint=x_rest,
+                           pid={"kp": 5.0, "ki": 0.0, "kd": 0.5},
+                           note="slider at the nominal rest position, pendulum hanging")
 
     # ------------------------------------------------------------------ rendering, pickling
     def render(self) -> NDArray[np.uint8] | None:

@@ -14,6 +14,7 @@ from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, po
 from . import _draw
 from ._base import FirstStateMeasured, PlantEnv, saturated_cost
 from ._conditions import Window, burst_delta, check_burst
+from ._design import DesignPoint
 
 UNCERTAINTY_READINGS = ("state", "rate")
 PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
@@ -263,6 +264,25 @@ class UncertainOscillatorEnv(PlantEnv):
         return StateSpaceModel(f=dyn.f, h=dyn.h, F=dyn.F, H=dyn.H, G=G, Q=params["Q"],
                                R=params["R"], dt=params["dt"], n_u=1,
                                name="UncertainOscillator(nominal, δ=0)")
+
+    def design_point(self) -> DesignPoint:
+        """``x1 = setpoint``, ``x2 = 0``, ``x3 = x3(0)``, ``u = (c·setpoint − b) / u_max``.
+
+        The holding force of the nominal model, eq (29) of paper 000 with δ = 0 (the
+        temporary uncertainty of the truth is not in the model); the damping parameter
+        ``x3`` is a constant state (an uncontrollable mode at 1), so the design regulates
+        ``(x1, x2)`` only. The weights are the reward's, ``(x1 − setpoint)² + 1e-3 a²``;
+        PID holds the measured x1 at the setpoint.
+        """
+        p = self.nominal_params
+        s = self.setpoint
+        u = (p["stiffness"] * s - p["drive"]) / p["u_max"]
+        M = np.zeros((4, 4))
+        M[0, 0], M[3, 3] = 1.0, 1e-3
+        x3 = float(self.initial_state[2])
+        return DesignPoint(x=np.array([s, 0.0, x3]), u=np.array([u]), M=M, states=(0, 1),
+                           output=0, setpoint=s, pid={"kp": 1.0, "ki": 2.0, "kd": 0.1},
+                           note="x1 at the setpoint; x3 (damping) is a constant parameter")
 
     def _draw(self, canvas: _draw.Canvas) -> None:
         canvas.set_view((-0.5, 2.5), (-1.0, 1.0))

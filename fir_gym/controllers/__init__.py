@@ -4,7 +4,7 @@ Both have stable-baselines3's ``predict(observation, state=None, episode_start=N
 deterministic=True) -> (action, state)``, so ``fir_gym.training.evaluate``, SB3's
 ``evaluate_policy`` and ``fir-gym compare-controllers`` (kinds ``lqg`` and ``pid``)
 treat them as policies. Each plant's operating point and tuning:
-:mod:`fir_gym.controllers.operating_points`.
+``plant.design_point()`` (:mod:`fir_gym.controllers.operating_points`).
 """
 
 from .lqg import LQGController

@@ -2,7 +2,8 @@
 
 ``LQGController(env)`` designs the discrete LQR of the plant's *nominal* model
 linearised at its operating point, with the weights of the plant's own reward
-(:mod:`.operating_points`, :mod:`.lqr`), and applies it to what ``env`` observes:
+(the plant's ``design_point()``, :mod:`.operating_points`; :mod:`.lqr`), and applies
+it to what ``env`` observes:
 
     a = clip(u* − K (x̂ − x*), −1, 1)
 
@@ -15,7 +16,8 @@ it an estimator.
 
 On an estimate, a plant may detune the design: VanDerPol-v0 weights the input 3 instead
 of the reward's 0.01, because its estimates are as noisy as its state (the reasons and
-the evidence: :mod:`.operating_points`). ``input_weight`` sets that weight by hand.
+the evidence: :meth:`fir_gym.envs.VanDerPolEnv.design_point`). ``input_weight`` sets that
+weight by hand.
 """
 
 from __future__ import annotations

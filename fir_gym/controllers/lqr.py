@@ -1,7 +1,7 @@
 """The discrete LQR of a plant's nominal model linearised at its operating point.
 
 The stage cost of a fir-gym reward is a quadratic form in ``z = [δx[k+1]; δu[k]]``
-(:class:`~fir_gym.controllers.operating_points.DesignPoint`), and
+(:class:`~fir_gym.envs.DesignPoint`, the plant's ``design_point()``), and
 ``δx[k+1] = A δx[k] + B δu[k]`` on the linearisation, so ``z = T [δx; δu]`` with
 ``T = [[A, B], [0, I]]`` and the cost is ``[δx; δu]ᵀ Tᵀ M T [δx; δu]``: state weight
 ``Q``, input weight ``R`` and cross term ``N``. The gain solves the discrete algebraic
@@ -21,9 +21,8 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
+from fir_gym.envs import DesignPoint
 from fir_gym.estimators.model import FD_RELATIVE_STEP
-
-from .operating_points import DesignPoint
 
 FloatArray = NDArray[np.float64]
 

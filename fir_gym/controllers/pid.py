@@ -18,7 +18,7 @@ point's input
 ``u_ff`` as feed-forward (the hover thrust, the oscillator's holding force). The
 memory ``(I, y[k−1], D)`` of each env travels in ``predict``'s ``state``, as a
 recurrent policy's does, and is cleared where ``episode_start`` is set. Defaults for
-the gains come from :mod:`.operating_points` (tuned by hand on the nominal model).
+the gains come from the plant's ``design_point()`` (tuned by hand on the nominal model).
 """
 
 from __future__ import annotations

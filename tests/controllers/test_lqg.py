@@ -144,7 +144,7 @@ def test_lqg_refuses_the_raw_measurement():
 
 
 def test_the_van_der_pol_lqg_is_detuned_on_an_estimate_only():
-    """VanDerPol-v0's estimate-fed LQG weights the input 3 (operating_points): the same
+    """VanDerPol-v0's estimate-fed LQG weights the input 3 (its design_point): the same
     design as the reward's weights with a² weighted 3, slower in x2 than the true-state LQR;
     ``input_weight`` overrides it and bad values are refused by name."""
     env_id = "fir_gym/VanDerPol-v0"
