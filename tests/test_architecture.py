@@ -11,8 +11,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 FORBIDDEN = {
     "estimators": {"gymnasium", "gym", "mujoco", "torch", "stable_baselines3", "envs",
-                   "fir_gym.envs", "fir_gym.wrappers", "fir_gym.scenarios", "matplotlib"},
-    "envs": {"torch", "stable_baselines3", "fir_gym.wrappers", "fir_gym.scenarios"},
+                   "fir_gym.envs", "fir_gym.wrappers", "fir_gym.scenarios", "matplotlib",
+                   "fir_gym.controllers"},
+    # a plant publishes its design point as a fir_gym.envs.DesignPoint: the controllers
+    # import the plants' record, never the other way (docs/architecture.md#design-point)
+    "envs": {"torch", "stable_baselines3", "fir_gym.wrappers", "fir_gym.scenarios",
+             "fir_gym.controllers"},
 }
 
 
