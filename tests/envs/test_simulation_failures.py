@@ -171,7 +171,7 @@ def test_render_of_a_broken_state_draws_something(env_id, bad):
     env.state = np.full(len(env.state_names), bad)
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.shape == healthy.shape
-    if env_id != "fir_gym/PendulumSlider-v0":           # MuJoCo draws its own simulation
+    if getattr(env, "mj_model", None) is None:         # MuJoCo draws its own simulation
         assert tuple(frame[0, 0]) == ACCENT and tuple(frame[-1, -1]) == ACCENT   # red frame
         assert tuple(healthy[0, 0]) == BACKGROUND
         if np.isnan(bad) or np.isfinite(bad):            # a view that can still be fitted:

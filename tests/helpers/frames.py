@@ -2,9 +2,12 @@
 
 The oracle of the estimate-drawing tests is the plant's own drawing: the centroid of
 the patch each plant paints for its true state (the orbit's body, the oscillator's
-mass, the carrier's deck, the Van der Pol phase point; for the MuJoCo pendulum the
-slider and bob geoms, read from MuJoCo's segmentation rendering). A marker drawn for
-an estimate ``x̂`` must sit where the plant, put at ``x̂``, draws its own bodies.
+mass, the carrier's deck, the Van der Pol phase point; for a MuJoCo plant — the
+pendulum — the slider and bob geoms, read from MuJoCo's segmentation rendering). A
+marker drawn for an estimate ``x̂`` must sit where the plant, put at ``x̂``, draws its
+own bodies. The patch is found by the colour the plant's legend gives its truth (its
+public ``truth_color``), so a body painted in another colour than the legend says has no
+pixels and fails the test; nothing here is keyed by a plant's class name.
 """
 
 from __future__ import annotations
@@ -18,14 +21,6 @@ from fir_gym.envs import _draw
 
 ESTIMATE = np.array(_draw.ESTIMATE, dtype=np.uint8)
 MEASUREMENT = np.array(_draw.MEASUREMENT, dtype=np.uint8)
-
-#: the colour of the patch each numpy plant paints for its true state
-TRUTH_COLOUR = {
-    "OrbitEnv": _draw.ACCENT,
-    "UncertainOscillatorEnv": _draw.ACCENT,
-    "CarrierMotionEnv": _draw.GREY,          # the deck strip
-    "VanDerPolEnv": _draw.ACCENT,
-}
 
 
 def pixels_of(frame: np.ndarray, colour) -> np.ndarray:
@@ -45,8 +40,7 @@ def near(points: np.ndarray, centre, radius: float) -> np.ndarray:
 
 def truth_centroids(plant) -> np.ndarray:
     """Where ``plant`` (rendered just now) drew its true state: ``(m, 2)`` pixel centroids."""
-    name = type(plant).__name__
-    if name == "PendulumSliderEnv":
+    if getattr(plant, "mj_model", None) is not None:   # a MuJoCo scene (the pendulum geoms)
         renderer = mujoco.Renderer(plant.mj_model, plant.height, plant.width)
         try:
             renderer.enable_segmentation_rendering()
@@ -62,7 +56,7 @@ def truth_centroids(plant) -> np.ndarray:
             out.append((cols.mean() + 0.5, rows.mean() + 0.5))
         return np.array(out)
     frame = plant.render()
-    return centroid(pixels_of(frame, TRUTH_COLOUR[name]))[None]
+    return centroid(pixels_of(frame, plant.truth_color))[None]
 
 
 def plant_at(plant, x) -> object:
