@@ -103,3 +103,34 @@ def register_envs() -> None:
         vector_entry_point="fir_gym._registration:pendulum_slider_vector",
         max_episode_steps=5000,
     )
+
+
+def register_plant(id: str, plant: str | type = "fir_gym.envs.model_plant:ModelPlant", *,
+                   max_episode_steps: int | None = None, vector: bool = True,
+                   **kwargs: Any) -> None:
+    """Register a plant of the user's own under the user's own id.
+
+    ``register_plant("my_pkg/Pendulum-v0", model=..., state_bounds=..., ...)`` registers a
+    :class:`~fir_gym.envs.ModelPlant` built with those keywords (the spec's ``kwargs``);
+    ``plant`` may instead name any :class:`~fir_gym.envs._base.PlantEnv` subclass (the class,
+    or ``"module:Class"``). The id then works as a fir-gym id does:
+    ``gym.make(id, estimator="ekf")`` (the entry point is :func:`make_plant`'s), the native
+    vector env ``gym.make_vec(id, n, vectorization_mode="vector_entry_point")`` (``vector``
+    False leaves it out) and :func:`fir_gym.training.make_sb3_vec_env`.
+
+    ``max_episode_steps`` (default: the plant's ``max_episode_steps`` keyword, else its
+    class's ``default_max_episode_steps``) is the ``TimeLimit`` and is given to the plant
+    too, so its terminal penalty counts the steps left to it. An id registered already is
+    replaced (Gymnasium warns), so a notebook may re-run its registration cell.
+    """
+    from gymnasium.envs.registration import load_env_creator
+
+    name = plant if isinstance(plant, str) else f"{plant.__module__}:{plant.__qualname__}"
+    if max_episode_steps is None:
+        max_episode_steps = kwargs.get("max_episode_steps") or getattr(
+            load_env_creator(name), "default_max_episode_steps", None)
+    if max_episode_steps is not None:
+        kwargs["max_episode_steps"] = int(max_episode_steps)
+    gym.register(id=id, entry_point=plant_factory(name),
+                 vector_entry_point=plant_vector_factory(name) if vector else None,
+                 max_episode_steps=max_episode_steps, kwargs=kwargs)

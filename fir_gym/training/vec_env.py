@@ -4,7 +4,8 @@
 ``VecEnv`` API. :func:`make_sb3_vec_env` builds one for a fir-gym id:
 
 * where the plant has a native vector env (every plant; PendulumSlider-v0's integrates
-  the equations MuJoCo simulates) it is
+  the equations MuJoCo simulates; a plant registered with :func:`fir_gym.register_plant`)
+  it is
   :class:`SB3VecEnv` over that env in same-step autoreset mode, with one batched
   estimator (:class:`~fir_gym.wrappers.VectorEstimatorObservation`) or one batched
   measurement window (:class:`~fir_gym.wrappers.VectorMeasurementStack`) on top;
@@ -237,7 +238,7 @@ def make_sb3_vec_env(
         raise ValueError("stack_horizon is an option of observation='measurement-stack'")
     estimator_kwargs = with_known_delay(estimator, estimator_kwargs,
                                         env_kwargs.get("sensor_faults"))
-    native = env_id in fir_gym.VECTOR_ENV_IDS
+    native = env_id in fir_gym.VECTOR_ENV_IDS or _has_native(env_id)
     if vec_env == "native" and not native:
         raise ValueError(f"{env_id} has no native vector env; use vec_env='dummy' or 'subproc'")
     if vec_env in ("auto", "native") and native:
@@ -256,6 +257,15 @@ def make_sb3_vec_env(
         venv.seed(int(seed))
         venv.action_space.seed(int(seed))
     return venv
+
+
+def _has_native(env_id: str) -> bool:
+    """Whether ``env_id`` (a user's, :func:`fir_gym.register_plant`) has a plant's native
+    vector env as its ``vector_entry_point``."""
+    from fir_gym.wrappers.factory import PlantVectorEntryPoint
+
+    spec = gym.registry.get(env_id)
+    return spec is not None and isinstance(spec.vector_entry_point, PlantVectorEntryPoint)
 
 
 def _observed(estimator: str | None, observation: str) -> str:

@@ -118,10 +118,15 @@ def plant_factory(plant: str) -> PlantEntryPoint:
     return PlantEntryPoint(plant)
 
 
-def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
-    """A ``vector_entry_point`` for ``plant``: a :class:`~fir_gym.envs._vector.PlantVectorEnv`."""
+class PlantVectorEntryPoint:
+    """The ``vector_entry_point`` of one plant: a :class:`~fir_gym.envs._vector.PlantVectorEnv`
+    of it (a picklable object, so that an env's spec pickles with it)."""
 
-    def make_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+    def __init__(self, plant: str) -> None:
+        self.plant = plant
+        self.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
+
+    def __call__(self, num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
         from fir_gym.envs._base import PlantEnv
         from fir_gym.envs._vector import PlantVectorEnv
 
@@ -130,11 +135,16 @@ def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
                 raise ValueError(f"{key} is not an option of the native vector env; wrap it in "
                                  "fir_gym.wrappers.VectorEstimatorObservation instead")
             kwargs.pop(key, None)
-        plant_class: Any = load_env_creator(plant)
+        plant_class: Any = load_env_creator(self.plant)
         if not (isinstance(plant_class, type) and issubclass(plant_class, PlantEnv)):
-            raise TypeError(f"the native vector env needs a fir-gym plant class; {plant!r} is "
-                            f"{plant_class!r}")
+            raise TypeError(f"the native vector env needs a fir-gym plant class; {self.plant!r} "
+                            f"is {plant_class!r}")
         return PlantVectorEnv(plant_class, num_envs=num_envs, **kwargs)
 
-    make_vector.__doc__ = f"Build a native vector env of {plant} (see PlantVectorEnv)."
-    return make_vector
+    def __repr__(self) -> str:
+        return f"PlantVectorEntryPoint({self.plant!r})"
+
+
+def plant_vector_factory(plant: str) -> Callable[..., gym.vector.VectorEnv]:
+    """A ``vector_entry_point`` for ``plant``: a :class:`~fir_gym.envs._vector.PlantVectorEnv`."""
+    return PlantVectorEntryPoint(plant)
