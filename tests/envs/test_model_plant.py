@@ -23,7 +23,7 @@ from gymnasium.utils.env_checker import check_env
 import fir_gym
 from fir_gym.controllers import LQGController
 from fir_gym.envs import ModelPlant, _draw
-from fir_gym.estimators import ContinuousModel
+from fir_gym.estimators import ContinuousModel, StateSpaceModel
 
 ENV_ID = "model_plant_test/Pendulum-v0"
 DT, G_OVER_L, DAMPING, TORQUE = 0.02, 9.81, 0.1, 15.0
@@ -89,7 +89,8 @@ def test_registered_id_has_the_time_limit_and_the_plant_knows_it():
 
 
 @pytest.mark.parametrize("estimator, options", [
-    ("ekf", {}), ("ukf", {}), ("efir", {"nominal": "reanchor", "horizon": 20})])
+    ("ekf", {}), ("ukf", {}), ("efir", {"nominal": "reanchor", "horizon": 20}),
+    ("cd-ekf", {})])                                     # cd-ekf: on its continuous_model
 def test_estimators_in_the_loop_beat_the_measurement(estimator, options):
     """Held up by the LQR on the true state, each estimate is closer to the truth than the
     measurement (angle) and than its finite difference (rate)."""
@@ -236,6 +237,64 @@ def test_native_vector_env_and_sb3_vec_env():
         obs, rewards, dones, _ = sb3.step(lqg.predict(obs)[0])
     assert obs.shape == (4, 2) and np.all(np.isfinite(obs)) and not dones.any()
     assert np.all(rewards > -1.0)                       # held near upright: small costs
+
+
+class EulerPendulum:
+    """The same pendulum as a discrete-time StateSpaceModel (one Euler step per dt), its
+    Jacobians left to the model's finite differences."""
+
+    def f(self, x, u):
+        theta, omega = x[..., 0], x[..., 1]
+        return np.stack([theta + DT * omega, omega + DT * (G_OVER_L * np.sin(theta)
+                                                           - DAMPING * omega + u[..., 0])],
+                        axis=-1)
+
+
+def discrete_pendulum() -> StateSpaceModel:
+    return StateSpaceModel(f=EulerPendulum().f, h=angle, Q=np.diag([0.0, 2e-4]),
+                           R=[[R_INTENSITY / DT]], dt=DT, n_u=1)
+
+
+def upright_cost(x, a, x_next):
+    return x_next[..., 0] ** 2
+
+
+class TiltedPendulum(ModelPlant):
+    """A user's PlantEnv subclass: the discrete pendulum with its settings as defaults."""
+
+    default_max_episode_steps = STEPS                # what register_plant registers
+
+    def __init__(self, **kwargs):
+        super().__init__(**{"model": discrete_pendulum(), **PLANT, **kwargs})
+
+
+def test_a_discrete_model_and_a_plant_class_of_ones_own():
+    fir_gym.register_plant("model_plant_test/Tilted-v0", TiltedPendulum, vector=False)
+    try:
+        env = gym.make("model_plant_test/Tilted-v0", estimator="ekf")
+        assert isinstance(env.unwrapped, TiltedPendulum)
+        assert env.spec.max_episode_steps == STEPS and env.spec.vector_entry_point is None
+        with pytest.warns(UserWarning, match="infinity"):
+            check_env(env.unwrapped)
+        lqg = LQGController(env)
+        held, _, _, down = rollout(env, lambda obs, info: lqg.predict(obs)[0], 3)
+        assert not down and len(held) == STEPS and np.max(np.abs(held[:, 0])) < 0.3
+    finally:
+        del gym.registry["model_plant_test/Tilted-v0"]
+
+
+def test_a_cost_function_needs_its_cap_and_gives_no_design_point():
+    with pytest.raises(ValueError, match="give cost_cap"):
+        ModelPlant(model=discrete_pendulum(), cost=upright_cost, **PLANT)
+    plant = ModelPlant(model=discrete_pendulum(), cost=upright_cost, cost_cap=0.5, **PLANT)
+    plant.reset(seed=0)
+    _, reward, _, _, info = plant.step(np.zeros(1))
+    assert reward == -info["state"][0] ** 2
+    with pytest.raises(NotImplementedError, match="state_weight and action_weight"):
+        plant.design_point()
+    weighted = ModelPlant(model=discrete_pendulum(), cost=upright_cost, cost_cap=0.5,
+                          state_weight=np.diag([1.0, 0.0]), **PLANT)
+    assert weighted.design_point().M[0, 0] == 1.0
 
 
 @pytest.mark.slow
