@@ -21,6 +21,7 @@ import scipy.linalg
 from gymnasium.utils.env_checker import check_env
 
 import fir_gym
+from fir_gym.conditions import condition_names, condition_setup, get_condition
 from fir_gym.controllers import LQGController
 from fir_gym.envs import ModelPlant, _draw
 from fir_gym.estimators import ContinuousModel, StateSpaceModel
@@ -212,6 +213,25 @@ def test_nominal_and_randomize_act_on_the_builders_parameters():
     with pytest.raises(NotImplementedError, match="dummy"):
         fir_gym_vector(model=pendulum, params={"g_over_l": G_OVER_L},
                        randomize={"g_over_l": 0.1})
+
+
+@pytest.mark.parametrize("name", condition_names())
+def test_every_robustness_condition_applies(name):
+    """Each condition at its first benchmark strength, as condition_setup builds it (the
+    mismatch on a pendulum whose g/l is a parameter), with the EKF in the loop."""
+    env_id = "model_plant_test/ParametricPendulum-v0"
+    fir_gym.register_plant(env_id, model=pendulum, params={"g_over_l": G_OVER_L}, **PLANT)
+    try:
+        setup = condition_setup(name, (*get_condition(name).strengths, 0.0)[0],
+                                gym.make(env_id).unwrapped)
+        env = gym.make(env_id, estimator="ekf", estimator_kwargs=setup.estimator_kwargs,
+                       sensor_faults=setup.sensor_faults or None, **setup.plant_kwargs)
+        K = LQGController(gym.make(env_id, observation="true")).design.K
+        x, x_hat, _, _ = rollout(env, lambda obs, info: np.clip(-K @ info["state"], -1, 1), 1)
+        assert len(x) == STEPS and np.all(np.isfinite(x_hat))
+        assert np.max(np.abs(x_hat[STEPS // 2:, 0] - x[STEPS // 2:, 0])) < 0.5
+    finally:
+        del gym.registry[env_id]
 
 
 def fir_gym_vector(**kwargs):
