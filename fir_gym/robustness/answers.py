@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from .plan import short_name
 from .tables import cells, paired_difference
 
 #: IQMs this close (relatively) count as a match
@@ -250,7 +251,7 @@ def answers(report: dict[str, Any], records: Sequence[dict[str, Any]]) -> list[s
     middle = middle_cells(report, records)
     for env_id in dict.fromkeys(c[0] for c in middle):
         plant_cells = [c for c in middle if c[0] == env_id]
-        name = env_id.split("/")[-1]
+        name = short_name(env_id)
         out += [f"{name}: {sentence}" for sentence in
                 (_q1(plant_cells), _q2(plant_cells), _q3(plant_cells)) if sentence]
     return out
@@ -264,7 +265,7 @@ def details(report: dict[str, Any], records: Sequence[dict[str, Any]]) -> list[s
         found = fir_against_kalman(cell)
         if found is None:
             continue
-        out.append(f"{cell[0].split('/')[-1]}, {found['label']}: the best FIR estimate "
+        out.append(f"{short_name(cell[0])}, {found['label']}: the best FIR estimate "
                    f"({found['fir_estimate']}) has {found['ratio']:.2g}× the error of the "
                    f"best Kalman one ({found['kalman_estimate']}); {found['fir_control']} "
                    f"{found['control']} {found['kalman_control']}")

@@ -28,13 +28,14 @@ from .plan import (
     EVAL_SEED,
     LQG_EPISODES,
     PLAIN_KINDS,
-    PLANTS,
     QUICK,
     REGIMES,
     SEEDS,
     applicable_estimators,
     check_selection,
+    plant_plan,
     settings,
+    short_name,
 )
 
 
@@ -93,7 +94,7 @@ def skipped(plants: Sequence[str], conditions: Sequence[str]) -> list[str]:
         for estimator in applicable_estimators(env_id):
             reasons = {refusal(estimator, gated, condition)
                        for condition in conditions for gated in (False, True)} - {None}
-            out += [f"{env_id.split('/')[-1]}: {reason}" for reason in sorted(r for r in reasons
+            out += [f"{short_name(env_id)}: {reason}" for reason in sorted(r for r in reasons
                                                                               if r)]
     return out
 
@@ -109,12 +110,12 @@ def learned_tasks(plants: Sequence[str], conditions: Sequence[str], out: Path, *
     chosen = settings(conditions, quick=quick)
     tasks = []
     for env_id in plants:
-        plan = PLANTS[env_id]
+        plan = plant_plan(env_id)
         kinds = list(QUICK.kinds if quick else (*PLAIN_KINDS, *plan.learned_estimators))
-        if quick:
+        if quick and plan.learned_estimators:
             kinds.append(plan.learned_estimators[0])
         steps = QUICK.steps if quick else plan.steps
-        folder = out / "runs" / env_id.split("/")[-1]
+        folder = out / "runs" / short_name(env_id)
         for regime in regimes:
             for kind in kinds:
                 for seed in range(n_seeds):

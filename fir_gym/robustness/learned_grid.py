@@ -29,7 +29,7 @@ import numpy as np
 from fir_gym.conditions import condition_setup
 
 from .closed_loop import build_env, play
-from .plan import GATE, PLAIN_KINDS, PLANTS, REGIMES, episode_steps
+from .plan import GATE, PLAIN_KINDS, REGIMES, episode_steps, plant_plan
 from .summaries import episode_summary
 
 
@@ -68,7 +68,7 @@ def training_config(task: LearnedTask) -> Any:
 
     from fir_gym.training.run import RunConfig
 
-    plan = PLANTS[task.env_id]
+    plan = plant_plan(task.env_id)
     env_kwargs: dict[str, Any] = dict(plan.env_kwargs)
     regime = REGIMES[task.regime]
     if regime is not None:
@@ -114,7 +114,7 @@ def run_learned_task(task: LearnedTask) -> dict[str, Any]:
     trained = time.perf_counter() - start
     model, normaliser = load_controller(config, out, None)
     policy = SB3Policy(model, normaliser)
-    plan = PLANTS[task.env_id]
+    plan = plant_plan(task.env_id)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         plant: Any = gym.make(task.env_id, **plan.env_kwargs).unwrapped

@@ -18,7 +18,7 @@ import numpy as np
 from fir_gym.conditions import condition_setup
 
 from .closed_loop import build_env, play
-from .plan import GATE, PLANTS, episode_steps
+from .plan import GATE, episode_steps, plant_plan
 from .summaries import episode_summary
 
 
@@ -56,7 +56,7 @@ def run_lqg_task(task: LQGTask) -> dict[str, Any]:
 
     from fir_gym.controllers import LQGController
 
-    plan = PLANTS[task.env_id]
+    plan = plant_plan(task.env_id)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         plant: Any = gym.make(task.env_id, **plan.env_kwargs).unwrapped

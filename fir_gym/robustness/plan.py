@@ -26,6 +26,7 @@ check the pipeline (its numbers mean nothing).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -118,6 +119,69 @@ class QuickPlan:
 QUICK = QuickPlan()
 
 
+def registered_id(env_id: str) -> str:
+    """The Gymnasium id of ``env_id``, importing its module first when it is written
+    ``module:id`` (Gymnasium's own convention for ``gym.make``: the module registers the
+    plant when imported); ValueError naming what is missing."""
+    import importlib
+
+    import gymnasium as gym
+
+    module, _, bare = env_id.rpartition(":")
+    if module:
+        try:
+            importlib.import_module(module)
+        except ImportError as err:
+            raise ValueError(f"plant {env_id!r}: cannot import module {module!r} ({err})") \
+                from None
+    if bare not in gym.registry:
+        raise ValueError(f"unknown benchmark plant {env_id!r}: not a registered id (the "
+                         f"benchmark's plants are {', '.join(PLANTS)}; a plant of your own: "
+                         "module:id, where importing module registers id)")
+    return bare
+
+
+def short_name(env_id: str) -> str:
+    """A plant's name in folders and tables (``module:ns/Name-v0`` → ``Name-v0``)."""
+    return env_id.rpartition(":")[2].split("/")[-1]
+
+
+#: the training steps of a plant the benchmark was not tuned for (those of most paper plants)
+DEFAULT_STEPS = 150_000
+#: the learned grid's estimators on such a plant: the first applicable of each group
+DEFAULT_LEARNED = (("kf", "ekf"), ("ukf",), ("fir", "efir"))
+
+
+@functools.cache
+def plant_plan(env_id: str) -> PlantPlan:
+    """The plan of a plant: its entry of :data:`PLANTS`, else (a plant of the user's own,
+    ``fir_gym.register_plant``) its registered options, :data:`DEFAULT_STEPS`, the windowed
+    filters' :data:`WINDOW`, and the first applicable estimator of each group of
+    :data:`DEFAULT_LEARNED` for the learned grid. ValueError for an id that is not a
+    fir-gym plant."""
+    if env_id in PLANTS:
+        return PLANTS[env_id]
+    import warnings
+
+    import gymnasium as gym
+
+    from fir_gym.envs._base import PlantEnv
+
+    registered_id(env_id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = gym.make(env_id)
+    is_plant = isinstance(env.unwrapped, PlantEnv)
+    env.close()
+    if not is_plant:
+        raise ValueError(f"plant {env_id!r} is not a fir-gym plant (a PlantEnv: "
+                         "fir_gym.register_plant builds one from a model)")
+    applicable = applicable_estimators(env_id)
+    learned = tuple(next(name for name in group if name in applicable)
+                    for group in DEFAULT_LEARNED if any(name in applicable for name in group))
+    return PlantPlan(env_id, {}, DEFAULT_STEPS, learned, WINDOW)
+
+
 def episode_steps(env_id: str) -> int:
     """The benchmark's episode length on a plant (its ``max_episode_steps`` option, else the
     registered time limit)."""
@@ -125,7 +189,7 @@ def episode_steps(env_id: str) -> int:
 
     steps = PLANTS[env_id].env_kwargs.get("max_episode_steps") if env_id in PLANTS else None
     if steps is None:
-        steps = gym.spec(env_id).max_episode_steps
+        steps = gym.spec(registered_id(env_id)).max_episode_steps
     if steps is None:
         raise ValueError(f"{env_id} has no episode length (max_episode_steps)")
     return int(steps)
@@ -183,9 +247,7 @@ def check_selection(plants: Sequence[str] | None, conditions: Sequence[str] | No
     """The plants and conditions asked for, checked (ValueError naming a bad one)."""
     chosen = list(plants) if plants else list(PLANTS)
     for env_id in chosen:
-        if env_id not in PLANTS:
-            raise ValueError(f"unknown benchmark plant {env_id!r}; plants are "
-                             f"{', '.join(PLANTS)}")
+        plant_plan(env_id)                  # a plant of the user's own is checked here
     names = list(conditions) if conditions else list(CONDITIONS)
     for name in names:
         get_condition(name)

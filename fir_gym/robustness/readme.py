@@ -16,6 +16,7 @@ from typing import Any
 from fir_gym.tables import format_table
 
 from .answers import FIR, KALMAN, MEMORY, error_of
+from .plan import short_name
 
 
 def _fmt(value: float | None, digits: int = 4) -> str:
@@ -56,7 +57,7 @@ def robustness_table(results: dict[str, Any]) -> str:
         lqg_true = next((x for x in r if x["name"] == "lqg-true"), None)
         learned_nominal = [x for x in r if x.get("regime") == "nominal"]
         rows.append([
-            cell["env_id"].split("/")[-1],
+            short_name(cell["env_id"]),
             "nominal" if cell["condition"] == "nominal"
             else f"{cell['condition']} {cell['strength']:g}",
             "—" if lqg_true is None else _fmt(lqg_true["iqm"], 3),

@@ -11,6 +11,7 @@ from typing import Any
 from fir_gym.tables import format_table
 
 from .answers import answers, details
+from .plan import short_name
 from .tables import cell_rows, cells
 
 __all__ = ["answers", "details", "markdown", "rebuild", "save_figures", "tables_of"]
@@ -93,7 +94,7 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
     for cell in report["tables"]:
         by_plant.setdefault(cell["env_id"], []).append(cell)
     for env_id, plant_cells in by_plant.items():
-        name = env_id.split("/")[-1]
+        name = short_name(env_id)
         lines += [f"## {env_id}", ""]
         lines += _summary_table(plant_cells, conditions)
         for figure in figures or []:
@@ -217,7 +218,7 @@ def save_figures(report: dict[str, Any], folder: Path) -> list[str]:
             fig.suptitle(f"{env_id}: {'LQG on each estimator' if family == 'lqg' else 'PPO'}"
                          " — return against condition strength (0: nominal)", fontsize=10)
             fig.tight_layout()
-            name = f"{env_id.split('/')[-1]}_{family}.png"
+            name = f"{short_name(env_id)}_{family}.png"
             fig.savefig(folder / name, dpi=110, bbox_inches="tight")
             plt.close(fig)
             written.append(f"figures/{name}")
