@@ -17,6 +17,7 @@ import json
 import re
 from pathlib import Path
 
+from fir_gym.robustness.plan import PLANTS, SEEDS
 from fir_gym.robustness.readme import controllers_table, robustness_table
 
 
@@ -27,12 +28,18 @@ def _run_line(results: dict) -> str:
         load = (f", load average {', '.join(f'{v:g}' for v in m['load_start'])} at the start "
                 f"and {', '.join(f'{v:g}' for v in m['load_end'])} at the end")
     jobs = f" --jobs {m['jobs']}" if m.get("jobs") else ""
-    return (f"`fir-gym benchmark-robustness --backend {m['backend']}{jobs}` "
+    seeds = max((r["seeds"] for cell in results["tables"] for r in cell["rows"]
+                 if r.get("regime") is not None), default=0)
+    seeds_option = f" --seeds {seeds}" if seeds and seeds != SEEDS else ""
+    steps = ", ".join(f"{env_id.split('/')[-1]} {PLANTS[env_id].steps:,}".replace(",", " ")
+                      for env_id in results["plants"] if env_id in PLANTS)
+    return (f"`fir-gym benchmark-robustness --backend {m['backend']}{jobs}{seeds_option}` "
             f"(code version `{results['code_version']}`) on {m['cpu']}, {m['cores']} cores"
             f"{load}: the LQG grid, {results['lqg_tasks']} cells of 100 episodes, in "
             f"{results['lqg_seconds'] / 60:.1f} min; the learned grid, "
             f"{results['learned_tasks']} trained controllers each evaluated under every "
-            f"condition, in {results['learned_seconds'] / 3600:.2f} h "
+            f"condition ({seeds} seeds per plant, kind and regime; training steps: {steps}), "
+            f"in {results['learned_seconds'] / 3600:.2f} h "
             f"({results['train_seconds'] / 3600:.2f} h of training, summed over workers"
             + (f"; {results['learned_reused']} reused from a finished run at the same code"
                if results.get("learned_reused") else "") + ").")
@@ -73,7 +80,7 @@ def controllers_block(results: dict) -> str:
         "plant's window), RecurrentPPO on the measurements and each estimator's estimate, "
         "and the LQG of the nominal model on the true state and on every applicable "
         "estimator (no training; on VanDerPol-v0 with the detuned input weight of "
-        "`fir_gym/controllers/operating_points.py`); every controller evaluated on the same "
+        "`VanDerPolEnv.design_point`, envs/van_der_pol.py); every controller evaluated on the same "
         "20 (PPO) or 100 (LQG) episodes. Returns are costs (higher is better); the "
         "estimation gap is the share of the row's cost that the same family on the true "
         "state removes; NEES: the median (χ²(n_x)'s is about n_x − 2/3), the fraction of "

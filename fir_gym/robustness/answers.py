@@ -222,12 +222,54 @@ def _q3(plant_cells: list[Cell]) -> str:
                                     best_nominal["name"]))].append(name)
     parts = []
     if any(memory_counts.values()):
-        parts.append("the best filter-fed PPO " + _counts(memory_counts)
-                     + " the best memory baseline")
+        parts.append("the best filter-fed PPO, against the best memory baseline, "
+                     + _counts(memory_counts))
     if any(dr_counts.values()):
-        parts.append("the best domain-randomised controller " + _counts(dr_counts)
-                     + " the best nominal-trained one")
+        parts.append("the best domain-randomised controller, against the best "
+                     "nominal-trained one, " + _counts(dr_counts))
     return ("Learned controllers: " + "; ".join(parts) + ".") if parts else ""
+
+
+# ---------------------------------------------------------------------------- the reference
+#: how far below the true-state LQG PPO on the true state may score before the learned
+#: rows' estimation gap stops measuring estimation (a share of the LQG's cost)
+WEAK_REFERENCE = 0.10
+
+
+def _reference(plant_cells: list[Cell]) -> str:
+    """Whether PPO on the true state, the learned rows' reference, is itself a weak
+    controller (the nominal cell): below the true-state LQG by more than
+    :data:`WEAK_REFERENCE` of its cost, and which nominal-trained kinds without the true
+    state score above it. Then the learned rows' estimation gaps are negative and measure
+    PPO's training on that input, not the estimate."""
+    cell = next((c for c in plant_cells if c[1] == "nominal"), None)
+    if cell is None:
+        return ""
+    rows = cell[3]
+    lqg_true = next((r for r in rows if r["name"] == "lqg-true"), None)
+    ppo_true = next((r for r in rows if r.get("regime") == "nominal" and r["kind"] == "true"),
+                    None)
+    if lqg_true is None or ppo_true is None:
+        return ""
+    shortfall = (lqg_true["iqm"] - ppo_true["iqm"]) / abs(lqg_true["iqm"] or 1.0)
+    if shortfall <= WEAK_REFERENCE:
+        return ""
+    above = [r for r in rows if r.get("regime") == "nominal" and r["kind"] != "true"
+             and "+gate" not in r["kind"] and r["iqm"] > ppo_true["iqm"]]
+    text = (f"PPO on the true state, the learned rows' reference, costs "
+            f"{ppo_true['iqm'] / lqg_true['iqm']:.2g}× the true-state LQG "
+            f"({ppo_true['iqm']:.3g} against {lqg_true['iqm']:.3g})")
+    if not above:
+        return (text + ": the learned rows' estimation gaps are measured against a weaker "
+                "controller than the LQG rows', so they understate what knowing the state "
+                "is worth.")
+    best = max(above, key=lambda r: r["iqm"])
+    return (text + f", and {len(above)} nominal-trained kinds without the true state score "
+            f"above it ({', '.join(r['kind'] for r in above)}; the best, {best['kind']}, "
+            f"{best['iqm']:.3g}): with the same training budget PPO learns less from the "
+            "true state than from poorer inputs, so the learned rows' estimation gaps "
+            "(negative where a row beats it) measure training, not estimation; the LQG "
+            "rows' gaps do.")
 
 
 def _word(verdict_text: str) -> str:
@@ -253,7 +295,8 @@ def answers(report: dict[str, Any], records: Sequence[dict[str, Any]]) -> list[s
         plant_cells = [c for c in middle if c[0] == env_id]
         name = short_name(env_id)
         out += [f"{name}: {sentence}" for sentence in
-                (_q1(plant_cells), _q2(plant_cells), _q3(plant_cells)) if sentence]
+                (_q1(plant_cells), _q2(plant_cells), _q3(plant_cells),
+                 _reference(plant_cells)) if sentence]
     return out
 
 
