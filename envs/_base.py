@@ -211,6 +211,20 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         self._last_extra: dict[str, Any] = {}
         self._model: StateSpaceModel | None = None
 
+    # ------------------------------------------------------------------ process noise
+    def _set_process_noise(self, cov: ArrayLike) -> None:
+        """The true plant's additive Gaussian process noise ``w ~ N(0, cov)`` (the square
+        root :meth:`_add_process_noise` draws with)."""
+        self._process_sqrt = psd_sqrt(np.asarray(cov, dtype=np.float64))
+        self._has_process_noise = bool(np.any(self._process_sqrt))
+
+    def _add_process_noise(self, x_next: FloatArray, rng: np.random.Generator) -> FloatArray:
+        """``x_next + w``, ``w ~ N(0, cov)`` of :meth:`_set_process_noise`, one draw per
+        system of a batch (nothing is drawn without process noise)."""
+        if not self._has_process_noise:
+            return x_next
+        return x_next + rng.standard_normal(x_next.shape) @ self._process_sqrt.T
+
     # ------------------------------------------------------------------ to implement
     # Every hook works on one system (x of shape (n_x,)) or on a batch (B, n_x): the
     # single env and the native vector env (fir_gym.envs._vector) share them. ``k`` is

@@ -26,7 +26,7 @@ from fir_gym.estimators import ContinuousModel, StateSpaceModel
 from fir_gym.estimators._validation import FloatArray, as_covariance, as_vector, positive
 
 from . import _draw
-from ._base import PlantEnv, psd_sqrt, saturated_cost
+from ._base import PlantEnv, saturated_cost
 from ._design import DesignPoint
 
 Model = StateSpaceModel | ContinuousModel
@@ -255,9 +255,8 @@ class ModelPlant(PlantEnv):
 
     def _set_truth(self, true_model: StateSpaceModel) -> None:
         self._true = true_model
-        cov = true_model.GQGT if self._process_override is None else self._process_override
-        self._process_sqrt = psd_sqrt(np.asarray(cov, dtype=np.float64))
-        self._has_process_noise = bool(np.any(self._process_sqrt))
+        self._set_process_noise(true_model.GQGT if self._process_override is None
+                                else self._process_override)
 
     def _check_fixed_point(self) -> None:
         drift = self.model.f(self.x_op, self.u_op) - self.x_op
@@ -304,10 +303,7 @@ class ModelPlant(PlantEnv):
     # ------------------------------------------------------------------ the hooks
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
-        x_next = self._true.f(x, a)
-        if self._has_process_noise:
-            x_next = x_next + rng.standard_normal(x.shape) @ self._process_sqrt.T
-        return x_next, {}
+        return self._add_process_noise(self._true.f(x, a), rng), {}
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return self._true.h(x)

@@ -12,7 +12,7 @@ from fir_gym.estimators import StateSpaceModel, compiled
 from fir_gym.estimators._validation import FloatArray, as_covariance, positive
 
 from . import _draw
-from ._base import FirstStateMeasured, PlantEnv, psd_sqrt, saturated_cost
+from ._base import FirstStateMeasured, PlantEnv, saturated_cost
 from ._conditions import column, entry, per_system
 from ._design import DesignPoint
 from ._interval_kernels import orbit_interval
@@ -239,8 +239,7 @@ class OrbitEnv(PlantEnv):
                          initial_state=initial_state, initial_state_cov=initial_state_cov,
                          measurement_cov=params["R"], render_mode=render_mode,
                          max_episode_steps=max_episode_steps, randomize=randomize, burst=burst)
-        self._process_sqrt = psd_sqrt(self.params["Q"])
-        self._has_process_noise = bool(np.any(self.params["Q"]))
+        self._set_process_noise(self.params["Q"])
         self._apply_params(self.params)
 
     def _apply_params(self, params: Mapping[str, Any]) -> None:
@@ -249,10 +248,7 @@ class OrbitEnv(PlantEnv):
 
     def _transition(self, x: FloatArray, a: FloatArray, k: Any, rng: np.random.Generator
                     ) -> tuple[FloatArray, dict[str, Any]]:
-        x_next = self._dynamics.f(x, a)
-        if self._has_process_noise:
-            x_next = x_next + rng.standard_normal(x.shape) @ self._process_sqrt.T
-        return x_next, {}
+        return self._add_process_noise(self._dynamics.f(x, a), rng), {}
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
         return OrbitDynamics.h(x)

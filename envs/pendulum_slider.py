@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fir_gym.estimators._validation import FloatArray, as_covariance, one_of, positive
 
-from ._base import PlantEnv, psd_sqrt, saturated_cost, state_failure
+from ._base import PlantEnv, saturated_cost, state_failure
 from ._conditions import per_system
 from ._design import DesignPoint
 from ._mujoco_rk4 import StageLaw, StageRK4, reset_warning
@@ -312,8 +312,7 @@ class PendulumSliderEnv(PlantEnv):
         self.cost_cap = self.BRACKET_CAP * self._reward_scale
         self.width, self.height = positive("width", width, integer=True), \
             positive("height", height, integer=True)
-        self._process_sqrt = psd_sqrt(self.params["Q"])
-        self._has_process_noise = bool(np.any(self.params["Q"]))
+        self._set_process_noise(self.params["Q"])
         #: the equations of motion with forces in newtons and no parameters of their own:
         #: the printed ODE a single env integrates in place of MuJoCo, and every batched step
         self._ode = self._make_dynamics({**self.params, "force_max": 1.0})
