@@ -222,8 +222,6 @@ def make_sb3_vec_env(
             between the plant and the estimator; its ``delay`` is told to the estimator
             unless ``estimator_kwargs`` sets one).
     """
-    import fir_gym
-
     one_of("vec_env", vec_env, VEC_ENVS)
     n = int(num_envs) if not isinstance(num_envs, bool) and isinstance(
         num_envs, (int, np.integer)) else 0
@@ -238,7 +236,7 @@ def make_sb3_vec_env(
         raise ValueError("stack_horizon is an option of observation='measurement-stack'")
     estimator_kwargs = with_known_delay(estimator, estimator_kwargs,
                                         env_kwargs.get("sensor_faults"))
-    native = env_id in fir_gym.VECTOR_ENV_IDS or _has_native(env_id)
+    native = _has_native(env_id)
     if vec_env == "native" and not native:
         raise ValueError(f"{env_id} has no native vector env; use vec_env='dummy' or 'subproc'")
     if vec_env in ("auto", "native") and native:
@@ -260,10 +258,14 @@ def make_sb3_vec_env(
 
 
 def _has_native(env_id: str) -> bool:
-    """Whether ``env_id`` (a user's, :func:`fir_gym.register_plant`) has a plant's native
-    vector env as its ``vector_entry_point``."""
+    """Whether ``env_id`` has a plant's native vector env: a fir-gym id of
+    :data:`fir_gym.VECTOR_ENV_IDS`, or a user's plant registered with
+    :func:`fir_gym.register_plant` (its ``vector_entry_point`` is a plant's)."""
+    from fir_gym import VECTOR_ENV_IDS
     from fir_gym.wrappers.factory import PlantVectorEntryPoint
 
+    if env_id in VECTOR_ENV_IDS:
+        return True
     spec = gym.registry.get(env_id)
     return spec is not None and isinstance(spec.vector_entry_point, PlantVectorEntryPoint)
 
