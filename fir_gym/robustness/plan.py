@@ -171,12 +171,13 @@ def plant_plan(env_id: str) -> PlantPlan:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env = gym.make(env_id)
-    is_plant = isinstance(env.unwrapped, PlantEnv)
-    env.close()
-    if not is_plant:
-        raise ValueError(f"plant {env_id!r} is not a fir-gym plant (a PlantEnv: "
-                         "fir_gym.register_plant builds one from a model)")
-    applicable = applicable_estimators(env_id)
+    try:
+        if not isinstance(env.unwrapped, PlantEnv):
+            raise ValueError(f"plant {env_id!r} is not a fir-gym plant (a PlantEnv: "
+                             "fir_gym.register_plant builds one from a model)")
+        applicable = _applicable(env.unwrapped, {})
+    finally:
+        env.close()
     learned = tuple(next(name for name in group if name in applicable)
                     for group in DEFAULT_LEARNED if any(name in applicable for name in group))
     return PlantPlan(env_id, {}, DEFAULT_STEPS, learned, WINDOW)
@@ -219,26 +220,32 @@ def applicable_estimators(env_id: str) -> list[str]:
 
     import gymnasium as gym
 
+    plan = PLANTS.get(env_id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = gym.make(env_id, **plan.env_kwargs if plan else {})
+    try:
+        return _applicable(env.unwrapped, plan.estimator_kwargs if plan else {})
+    finally:
+        env.close()
+
+
+def _applicable(plant: Any, options: dict[str, dict[str, Any]]) -> list[str]:
+    """The estimators of the registry (those estimating the current state) that build on
+    ``plant`` with their ``options``."""
     from fir_gym.estimators import estimator_class, estimator_names
     from fir_gym.wrappers.estimator_observation import build_estimator
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        env = gym.make(env_id, **PLANTS[env_id].env_kwargs if env_id in PLANTS else {})
-    plant = env.unwrapped
     names = []
     for name in estimator_names():
         if name in NOT_CURRENT:
             continue
-        options = dict(PLANTS[env_id].estimator_kwargs.get(name, {})) if env_id in PLANTS \
-            else {}
         try:
             build_estimator(estimator_class(name), lambda attr: getattr(plant, attr, None),
-                            options)
+                            dict(options.get(name, {})))
         except (TypeError, ValueError):
             continue
         names.append(name)
-    env.close()
     return names
 
 
