@@ -19,41 +19,15 @@ import numpy as np
 import pytest
 import scipy.linalg
 from gymnasium.utils.env_checker import check_env
+from user_pendulum import DAMPING, DT, G_OVER_L, PLANT, R_INTENSITY, STEPS, TORQUE, angle, pendulum
 
 import fir_gym
 from fir_gym.conditions import condition_names, condition_setup, get_condition
 from fir_gym.controllers import LQGController
 from fir_gym.envs import ModelPlant, _draw
-from fir_gym.estimators import ContinuousModel, StateSpaceModel
+from fir_gym.estimators import StateSpaceModel
 
 ENV_ID = "model_plant_test/Pendulum-v0"
-DT, G_OVER_L, DAMPING, TORQUE = 0.02, 9.81, 0.1, 15.0
-R_INTENSITY = 1e-5                       # the sampled angle's noise: R/dt, σ ≈ 0.022 rad
-STEPS = 200
-
-
-def pendulum(g_over_l: float = G_OVER_L) -> ContinuousModel:
-    return ContinuousModel(a=Drift(g_over_l), h=angle, Q=[[0.01]], G=[[0.0], [1.0]],
-                           R=[[R_INTENSITY]], dt=DT, n_u=1, name="inverted pendulum")
-
-
-class Drift:
-    def __init__(self, g_over_l: float) -> None:
-        self.g_over_l = g_over_l
-
-    def __call__(self, x, u):
-        theta, omega = x[..., 0], x[..., 1]
-        return np.stack([omega, self.g_over_l * np.sin(theta) - DAMPING * omega + u[..., 0]],
-                        axis=-1)
-
-
-def angle(x):
-    return x[..., :1].copy()
-
-
-PLANT = dict(action_scale=TORQUE, state_bounds=([-0.8, -8.0], [0.8, 8.0]),
-             initial_state=[0.1, 0.0], initial_state_cov=np.diag([0.05 ** 2, 0.05 ** 2]),
-             state_names=["theta", "omega"], max_episode_steps=STEPS)
 
 
 @pytest.fixture(scope="module", autouse=True)
