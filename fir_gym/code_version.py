@@ -25,7 +25,7 @@ SUFFIXES = (".py", ".yml", ".yaml", ".xml")
 PRESENTATION = ("_cli_parser.py", "_commands.py", "_extras.py", "cli.py", "tables.py",
                 "video.py", "benchmarks", "plotting", "scenarios", "robustness/benchmark.py",
                 "robustness/report.py", "robustness/tables.py", "robustness/answers.py",
-                "robustness/readme.py",
+                "robustness/readme.py", "robustness/formatting.py",
                 "training/benchmark.py", "training/curves.py")
 
 

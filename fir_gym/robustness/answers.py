@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from .formatting import middle
 from .plan import short_name
 from .tables import cells, paired_difference
 
@@ -46,7 +47,7 @@ MEMORY = ("measurement-stack", "recurrent")
 Cell = tuple[str, str, float, list[dict[str, Any]], list[dict[str, Any]]]
 
 
-def _base(kind: str) -> str:
+def base_estimator(kind: str) -> str:
     """An estimator's registry name from a row's kind (``lqg-efir+gate`` → ``efir``)."""
     return kind.removeprefix("lqg-").removesuffix("+gate")
 
@@ -85,8 +86,8 @@ def middle_cells(report: dict[str, Any], records: Sequence[dict[str, Any]]) -> l
     out = []
     for cell in report["tables"]:
         strengths = report.get("conditions", {}).get(cell["condition"], [0.0])
-        middle = strengths[len(strengths) // 2] if strengths else 0.0
-        if cell["condition"] != "nominal" and not math.isclose(cell["strength"], middle):
+        if cell["condition"] != "nominal" and not math.isclose(cell["strength"],
+                                                               middle(strengths)):
             continue
         key = (cell["env_id"], cell["condition"], float(cell["strength"]))
         out.append((*key, cell["rows"], grouped.get(key, [])))
@@ -99,7 +100,7 @@ def label(condition: str, strength: float) -> str:
 
 def _lqg(rows: list[dict[str, Any]], family: tuple[str, ...]) -> list[dict[str, Any]]:
     return [r for r in rows if r["name"].startswith("lqg-") and r["name"] != "lqg-true"
-            and _base(r["kind"]) in family]
+            and base_estimator(r["kind"]) in family]
 
 
 # ---------------------------------------------------------------------------- question 1

@@ -10,19 +10,13 @@ results; the prose around them says what was run, on which machine, and how long
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from fir_gym.tables import format_table
 
-from .answers import FIR, KALMAN, MEMORY, error_of
+from .answers import FIR, KALMAN, MEMORY, base_estimator, error_of, label, middle_cells
+from .formatting import gap_interval, interval, number
 from .plan import short_name
-
-
-def _fmt(value: float | None, digits: int = 4) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "—"
-    return f"{value:.{digits}g}"
 
 
 def _entry(row: dict[str, Any] | None) -> str:
@@ -31,7 +25,7 @@ def _entry(row: dict[str, Any] | None) -> str:
         return "—"
     name = row["name"].removeprefix("lqg-").replace(" (nominal)", "")
     gap = "" if row.get("gap") is None else f" ({row['gap']:.2f})"
-    return f"{name} {_fmt(row['iqm'], 3)}{gap}"
+    return f"{name} {number(row['iqm'], 3)}{gap}"
 
 
 def _best(rows: list[dict[str, Any]], keep: Any) -> dict[str, Any] | None:
@@ -39,32 +33,21 @@ def _best(rows: list[dict[str, Any]], keep: Any) -> dict[str, Any] | None:
     return max(chosen, key=lambda r: r["iqm"]) if chosen else None
 
 
-def _base(kind: str) -> str:
-    return kind.removeprefix("lqg-").removesuffix("+gate")
-
-
 def robustness_table(results: dict[str, Any]) -> str:
     """Per plant and condition (middle strength): the true-state LQG's return, and each
     family's best controller with its return and estimation gap."""
-    conditions = results.get("conditions", {})
     rows = []
-    for cell in results["tables"]:
-        strengths = conditions.get(cell["condition"], [0.0])
-        middle = strengths[len(strengths) // 2] if strengths else 0.0
-        if cell["condition"] != "nominal" and not math.isclose(cell["strength"], middle):
-            continue
-        r = cell["rows"]
+    for env_id, condition, strength, r, _ in middle_cells(results,
+                                                          results.get("records", [])):
         lqg_true = next((x for x in r if x["name"] == "lqg-true"), None)
         learned_nominal = [x for x in r if x.get("regime") == "nominal"]
         rows.append([
-            short_name(cell["env_id"]),
-            "nominal" if cell["condition"] == "nominal"
-            else f"{cell['condition']} {cell['strength']:g}",
-            "—" if lqg_true is None else _fmt(lqg_true["iqm"], 3),
+            short_name(env_id), label(condition, strength),
+            "—" if lqg_true is None else number(lqg_true["iqm"], 3),
             _entry(_best(r, lambda x: x["name"].startswith("lqg-")
-                         and _base(x["kind"]) in KALMAN)),
+                         and base_estimator(x["kind"]) in KALMAN)),
             _entry(_best(r, lambda x: x["name"].startswith("lqg-")
-                         and _base(x["kind"]) in FIR)),
+                         and base_estimator(x["kind"]) in FIR)),
             _entry(_best(learned_nominal, lambda x: x["kind"] not in
                          (*MEMORY, "true", "measurement"))),
             _entry(_best(learned_nominal, lambda x: x["kind"] in MEMORY)),
@@ -90,11 +73,9 @@ def controllers_table(results: dict[str, Any], env_id: str) -> str:
             continue
         rmse = "—" if r["rmse"] is None else ", ".join(f"{v:.3g}" for v in r["rmse"])
         rows.append([r["name"].replace(" (nominal)", ""), r["seeds"],
-                     f"{_fmt(r['iqm'])} [{_fmt(r['low'])}, {_fmt(r['high'])}]",
-                     "—" if r.get("gap") is None else
-                     f"{r['gap']:.2f} [{r['gap_low']:.2f}, {r['gap_high']:.2f}]",
-                     rmse, _fmt(r.get("nees_median"), 3), _fmt(r.get("nees_in_band"), 2),
-                     _fmt(r.get("nees_mean"), 3)])
+                     interval(r["iqm"], r["low"], r["high"]), gap_interval(r),
+                     rmse, number(r.get("nees_median"), 3), number(r.get("nees_in_band"), 2),
+                     number(r.get("nees_mean"), 3)])
     return format_table(["controller", "seeds", "IQM return [95% CI]",
                          "estimation gap [95% CI]", "estimation RMSE per state",
                          "NEES median", "in χ² band", "ANEES"], rows, markdown=True)

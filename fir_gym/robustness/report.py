@@ -11,6 +11,7 @@ from typing import Any
 from fir_gym.tables import format_table
 
 from .answers import answers, details
+from .formatting import gap_interval, interval, middle, number
 from .plan import short_name
 from .tables import cell_rows, cells
 
@@ -25,35 +26,12 @@ def tables_of(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
             for (env_id, condition, strength), rs in cells(records).items()]
 
 
-def _number(value: float | None, digits: int = 4) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
-    return f"{value:.{digits}g}"
-
-
-def _interval(centre: float | None, low: float | None, high: float | None,
-              digits: int = 4) -> str:
-    if centre is None:
-        return "—"
-    return f"{_number(centre, digits)} [{_number(low, digits)}, {_number(high, digits)}]"
-
-
-def _gap(row: dict[str, Any]) -> str:
-    if row.get("gap") is None:
-        return "—"
-    return f"{row['gap']:.2f} [{row['gap_low']:.2f}, {row['gap_high']:.2f}]"
-
-
 def _recovery(row: dict[str, Any]) -> str:
     if "recovery" not in row:
         return "—"
     if row["recovery"] is None:
         return "n/a"
     return (">" if row.get("recovery_censored") else "") + f"{row['recovery']:.0f}"
-
-
-def _middle(strengths: list[float]) -> float:
-    return strengths[len(strengths) // 2] if strengths else 0.0
 
 
 def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
@@ -111,11 +89,11 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
             for cell in chosen:
                 for r in cell["rows"]:
                     rmse = "—" if r["rmse"] is None else ", ".join(f"{v:.3g}" for v in r["rmse"])
-                    rows.append([r["name"], _number(cell["strength"]), r["seeds"],
-                                 _interval(r["iqm"], r["low"], r["high"]), _gap(r), rmse,
-                                 _number(r.get("nees_median"), 3),
-                                 _number(r.get("nees_in_band"), 2),
-                                 _number(r.get("diverged"), 2), _recovery(r)])
+                    rows.append([r["name"], number(cell["strength"]), r["seeds"],
+                                 interval(r["iqm"], r["low"], r["high"]), gap_interval(r), rmse,
+                                 number(r.get("nees_median"), 3),
+                                 number(r.get("nees_in_band"), 2),
+                                 number(r.get("diverged"), 2), _recovery(r)])
             lines.append(format_table(
                 ["controller", "strength", "seeds", "IQM return [95% CI]",
                  "estimation gap [95% CI]", "RMSE per state", "NEES median", "in χ² band",
@@ -130,11 +108,11 @@ def _summary_table(plant_cells: list[dict[str, Any]], conditions: dict[str, list
     estimation gap (the IQM return for the true-state rows)."""
     chosen = []
     for condition, strengths in conditions.items():
-        middle = _middle(strengths) if condition != "nominal" else 0.0
+        strength = middle(strengths) if condition != "nominal" else 0.0
         cell = next((c for c in plant_cells if c["condition"] == condition
-                     and math.isclose(c["strength"], middle)), None)
+                     and math.isclose(c["strength"], strength)), None)
         if cell is not None:
-            chosen.append((f"{condition} {_number(middle)}" if condition != "nominal"
+            chosen.append((f"{condition} {number(strength)}" if condition != "nominal"
                            else "nominal", cell))
     if not chosen:
         return []
@@ -147,7 +125,7 @@ def _summary_table(plant_cells: list[dict[str, Any]], conditions: dict[str, list
             if r is None:
                 row.append("—")
             elif r.get("gap") is None:
-                row.append(f"R {_number(r['iqm'])}")
+                row.append(f"R {number(r['iqm'])}")
             else:
                 row.append(f"{r['gap']:.2f}")
         table.append(row)
