@@ -5,11 +5,13 @@ with an error that says what to do (no silent traps): ``model`` on the Kalman fa
 (``model_reassignable``; the filter rebuilds what it derived from it in
 ``_model_changed``), refused on the filters that precompute gains from it;
 ``nan_policy``, ``nis_patience``, ``max_covariance_trace`` and ``gate`` validated and live
-(the last three are entries of the compiled steps' ``_limits``).
+(the last three are entries of the state record's ``limits``, :mod:`.state`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -17,6 +19,7 @@ import scipy.stats
 
 from ._validation import one_of, open_probability, positive
 from .model import StateSpaceModel
+from .state import GATE, MAX_TRACE, NIS_PATIENCE
 
 __all__ = ["NAN_POLICIES", "LiveAttributes"]
 
@@ -75,26 +78,44 @@ class LiveAttributes:
             self._model_changed()
             raise
 
+    @contextmanager
+    def _stepping_with(self, model: StateSpaceModel | None) -> Iterator[None]:
+        """Step with ``model`` (of the same sizes, e.g. this call's ``R`` or ``H``) inside the
+        block, and with the filter's own model again after it, whatever happens (``None``:
+        the filter's own model throughout). The public ``update(y, R=..., H=...)`` of the
+        Kalman family (:mod:`.public_steps`)."""
+        if model is None:
+            yield
+            return
+        own = self._filter_model
+        self._filter_model = model
+        self._model_changed()
+        try:
+            yield
+        finally:
+            self._filter_model = own
+            self._model_changed()
+
     def _model_changed(self) -> None:
         """Hook: rebuild what the filter derived from ``self.model`` (a new one was assigned)."""
 
     @property
     def max_covariance_trace(self) -> float:
         """Divergence limit on ``trace(P)`` (assignable)."""
-        return float(self._limits[2])
+        return float(self._limits[MAX_TRACE])
 
     @max_covariance_trace.setter
     def max_covariance_trace(self, value: float) -> None:
-        self._limits[2] = positive("max_covariance_trace", value)
+        self._limits[MAX_TRACE] = positive("max_covariance_trace", value)
 
     @property
     def nis_patience(self) -> int:
         """Consecutive high-NIS steps that flag divergence (assignable)."""
-        return int(self._limits[1])
+        return int(self._limits[NIS_PATIENCE])
 
     @nis_patience.setter
     def nis_patience(self, value: int) -> None:
-        self._limits[1] = float(positive("nis_patience", value, integer=True))
+        self._limits[NIS_PATIENCE] = float(positive("nis_patience", value, integer=True))
 
     @property
     def gate(self) -> float | None:
@@ -115,7 +136,7 @@ class LiveAttributes:
         if value is None:
             self._gate: float | None = None
             self._gate_threshold: float | None = None
-            self._limits[4] = np.inf
+            self._limits[GATE] = np.inf
             return
         gate = open_probability("gate", value)
         if not self.can_gate:
@@ -126,7 +147,7 @@ class LiveAttributes:
         self._gate = gate
         #: the NIS above which a measurement is rejected: χ²(n_y)'s ``gate`` quantile
         self._gate_threshold = float(scipy.stats.chi2.ppf(gate, self._n_y))
-        self._limits[4] = self._gate_threshold
+        self._limits[GATE] = self._gate_threshold
 
     @property
     def nan_policy(self) -> str:

@@ -55,8 +55,9 @@ def check_batched(name: str, fn: Callable[..., Any], x0: FloatArray, u0: FloatAr
 def check_model_batched(est: Any) -> None:
     """:func:`check_batched` on the model's ``f`` and ``h`` at the filter's prior mean."""
     model = est.model
-    x0 = np.asarray(est._x0, dtype=np.float64)
+    x0 = np.asarray(est.prior[0], dtype=np.float64)
     x0 = x0[0] if x0.ndim == 2 else x0
     name = type(est).__name__
-    check_batched("f", model._f, x0, np.zeros(model.n_u), model.n_x, name)
-    check_batched("h", model._h, x0, None, model.n_y, name)
+    f, _, h, _ = model.unchecked_callables()
+    check_batched("f", f, x0, np.zeros(model.n_u), model.n_x, name)
+    check_batched("h", h, x0, None, model.n_y, name)

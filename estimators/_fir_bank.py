@@ -61,16 +61,17 @@ class WindowBank:
 
     def __init__(self, n_batch: int, n_windows: int, n: int) -> None:
         self.n, self.W = n, n_windows
-        self._fresh = np.zeros((2 * n, 2 * n + 1))
-        self._fresh[:n, n:2 * n] = np.eye(n)                      # T = I, all else 0
+        #: a window as it starts: ``x̄ = 0, P = 0, T = I, F = b = 0`` (rows of ``Z[b, :, w]``)
+        self.blank = np.zeros((2 * n, 2 * n + 1))
+        self.blank[:n, n:2 * n] = np.eye(n)                      # T = I, all else 0
         self.Z = np.empty((n_batch, 2 * n, n_windows, 2 * n + 1))
-        self.Z[...] = self._fresh[None, :, None, :]
+        self.Z[...] = self.blank[None, :, None, :]
         self.ref = np.zeros((n_batch, n_windows, n))
         self._has_ref = False
 
     def restart(self, w: int, x_ref: FloatArray | None = None) -> None:
         """Start window ``w`` afresh: ``x̄ = x_ref`` (default 0), ``P = 0, T = I, F = b = 0``."""
-        self.Z[:, :, w, :] = self._fresh
+        self.Z[:, :, w, :] = self.blank
         if x_ref is not None or self._has_ref:
             self.ref[:, w] = 0.0 if x_ref is None else x_ref
             self.Z[:, :self.n, w, 2 * self.n] = self.ref[:, w]

@@ -12,6 +12,7 @@ from ._validation import FloatArray, positive
 from .base import Estimator
 from .compiled import watch
 from .model import StateSpaceModel
+from .state import GATE, MAX_ESTIMATE
 
 #: ``(e, A, Qx, H, R)`` of the one-step innovation test (:mod:`._consistency`)
 InnovationTerms = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
@@ -67,7 +68,7 @@ class WindowedEstimator(Estimator):
         self.max_estimate = positive("max_estimate", max_estimate)
         super().__init__(model, **options)
         #: the watch's limits with the growth bound (:mod:`.compiled.watch`)
-        self._limits[3] = self.max_estimate
+        self._limits[MAX_ESTIMATE] = self.max_estimate
 
     @abstractmethod
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
@@ -85,7 +86,7 @@ class WindowedEstimator(Estimator):
     def _consistency_prior(self) -> tuple[FloatArray, FloatArray, np.ndarray | None]:
         """The previous estimate the innovation test predicts from, its covariance, and where
         it is usable (``None``: everywhere). Default: the filter's own ``x̂``, ``P``."""
-        return self._x, self._P, None
+        return self._state.x, self._state.P, None
 
     def _nis_inputs(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                     ) -> tuple[FloatArray, ...]:
@@ -125,7 +126,7 @@ class WindowedEstimator(Estimator):
                            ) -> tuple[FloatArray, np.ndarray]:
         """The gate (class docstring): ``y`` and ``valid`` for the pass, the measurements whose
         NIS exceeds the threshold made missing (NaN NIS compares False: not gated)."""
-        rejected = nis > self._limits[4]
+        rejected = nis > self._limits[GATE]
         if not rejected.any():
             return y, valid
         return np.where(rejected[:, None], 0.0, y), valid & ~rejected
@@ -137,7 +138,7 @@ class WindowedEstimator(Estimator):
         super()._accept(x, P, nis, self._nis_valid if self.reports_nis else valid)
         grown = ~(np.abs(x).max(axis=1) <= self.max_estimate)
         if grown.any():
-            self._diverged |= grown
+            self._state.diverged |= grown
 
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         self._compiled_pass(y, None, valid)
@@ -147,6 +148,7 @@ class WindowedEstimator(Estimator):
         self._compiled_pass(y, u, valid)
 
     def _compiled_pass(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray) -> None:
+        s = self._state
         has_nis = self.reports_nis
         with np.errstate(all="ignore"):
             if has_nis:
@@ -158,10 +160,9 @@ class WindowedEstimator(Estimator):
                 if self._gate_threshold is not None:
                     y, valid = self._gated_measurement(y, valid, nis)
             else:
-                nis, usable = self._nis, valid
+                nis, usable = s.nis, valid
             x, P, _ = self._advance(y, u, valid)
-        watch.accept(x, P, nis, usable, has_nis, self._x, self._P, self._diverged,
-                     self._nis_run, self._nis, self._limits)
+        watch.accept(x, P, nis, usable, has_nis, s)
 
     def _restart_systems(self, mask: np.ndarray) -> None:
         self._pending = mask.copy() if self._pending is None else self._pending | mask

@@ -82,6 +82,7 @@ from ._validation import FloatArray, as_batch, as_covariance, positive, real_arr
 from .delay import DelayLine, check_delay, predict_ahead
 from .model import StateSpaceModel
 from .sequences import FilterResult, filter_sequence
+from .state import FilterState, new_limits
 
 #: what a numpy hook returns: ``(x, P, nis)``, or ``(x, P, nis, log det S)`` for a filter
 #: with a Gaussian innovation (its log-likelihood, :attr:`Estimator.last_info`)
@@ -171,11 +172,24 @@ class Estimator(LiveAttributes, ABC):
         #: the limits as the compiled twins read them (:mod:`.compiled.watch`): the watch's
         #: three, the windowed filters' ``max_estimate`` and the gate's NIS threshold (inf:
         #: none); the properties ``nis_patience``, ``max_covariance_trace`` and ``gate`` write them
-        self._limits = np.array([self._nis_threshold, float(patience), max_trace, np.inf,
-                                 np.inf])
+        self._limits = new_limits(self._nis_threshold, patience, max_trace)
         self.gate = gate
         self._delay = check_delay(delay, model)
         self.reset(x0, P0)
+
+    @property
+    def state(self) -> FilterState:
+        """The filter's state record (:class:`~fir_gym.estimators.state.FilterState`), live: the
+        arrays and flags the next step reads and writes, passed whole to the numpy reference,
+        the compiled twin and ``predict``/``update``. Read it; change the estimate through
+        :meth:`reset` and :meth:`restart` (``copy.deepcopy(est.state)`` is a snapshot)."""
+        return self._state
+
+    @property
+    def prior(self) -> tuple[FloatArray, FloatArray]:
+        """The prior ``(x0, P0)`` that :meth:`reset` set (copies; batched where it was given
+        batched) — what a restarted system returns to."""
+        return self._x0.copy(), self._P0.copy()
 
     @property
     def delay(self) -> int:
@@ -207,27 +221,12 @@ class Estimator(LiveAttributes, ABC):
         self._batch: int | None = sizes.pop() if sizes else None
         self._batched_prior = self._batch is not None
         self._x0, self._P0 = x0_, P0_
-        #: the state of every system; empty until the first step fixes the batch size
-        self._n_b = 0
-        self._x: FloatArray = np.empty((0, n))
-        self._P: FloatArray = np.empty((0, n, n))
-        self._diverged: np.ndarray = np.zeros(0, bool)
-        self._nis_run: np.ndarray = np.zeros(0, np.int64)
-        self._nis: FloatArray = np.zeros(0)
-        self._logdet: FloatArray = np.zeros(0)
-        self._fresh: np.ndarray = np.zeros(0, bool)
-        self._gated: np.ndarray = np.zeros(0, bool)
-        self._gated_count: np.ndarray = np.zeros(0, np.int64)
+        #: the state record (:mod:`.state`): empty until the first step fixes the batch size
+        self._state = FilterState(n=n, limits=self._limits)
         #: with a delay: the inputs kept and each system's age, and the estimate predicted
         #: to the current step (:mod:`.delay`)
         self._line: DelayLine | None = None
         self._ahead: tuple[FloatArray, FloatArray] = (np.empty((0, n)), np.empty((0, n, n)))
-        self._k = 0
-        #: whether the next step is an update only: the first after ``reset``, or one after
-        #: ``predict`` (:mod:`.public_steps`)
-        self._update_next = True
-        self._single = False
-        self._restarting = False
         self._y_shape: tuple[int, ...] | None = None
         self._reset_state()
 
@@ -241,9 +240,10 @@ class Estimator(LiveAttributes, ABC):
         Before the first step, or when every system restarts, this is :meth:`reset`
         with the same prior.
         """
-        if not self._n_b:
+        s = self._state
+        if not s.batch:
             return
-        n_b = self._n_b
+        n_b = s.batch
         chosen = np.asarray(systems)
         mask = np.zeros(n_b, bool)
         try:
@@ -263,22 +263,23 @@ class Estimator(LiveAttributes, ABC):
         if self._line is not None:
             self._line.restart(mask)
             x_ahead, P_ahead = self._ahead
-            x_ahead[mask] = self._x[mask]
-            P_ahead[mask] = self._P[mask]
+            x_ahead[mask] = s.x[mask]
+            P_ahead[mask] = s.P[mask]
 
     def _restart_rows(self, mask: np.ndarray) -> None:
         """Send the systems ``mask`` (some, not all) back to the prior: their next step is a
         first step."""
-        n_b, n = self._n_b, self.model.n_x
-        self._x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
-        if self._P.shape[0] < n_b:                     # a shared covariance parts ways
-            self._P = np.repeat(self._P, n_b, axis=0)
-        self._P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
-        self._diverged[mask] = False
-        self._nis_run[mask] = 0
-        self._gated_count[mask] = 0
-        self._fresh |= mask
-        self._restarting = True
+        s = self._state
+        n_b, n = s.batch, self.model.n_x
+        s.x[mask] = np.broadcast_to(self._x0, (n_b, n))[mask]
+        if s.P.shape[0] < n_b:                     # a shared covariance parts ways
+            s.P = np.repeat(s.P, n_b, axis=0)
+        s.P[mask] = np.broadcast_to(self._P0, (n_b, n, n))[mask]
+        s.diverged[mask] = False
+        s.nis_run[mask] = 0
+        s.gated_count[mask] = 0
+        s.fresh |= mask
+        s.restarting = True
         self._restart_systems(mask)
 
     def step(self, y: ArrayLike | None, u: ArrayLike | None = None) -> FloatArray:
@@ -299,14 +300,15 @@ class Estimator(LiveAttributes, ABC):
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
         self._take_step(Y, U, valid)
-        x = self._x
-        return x[0].copy() if self._single else x.copy()
+        s = self._state
+        return s.x[0].copy() if s.single else s.x.copy()
 
     def _take_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
         """One step on checked arrays, compiled or numpy (the module docstring's rule)."""
+        s = self._state
         self._last_valid: np.ndarray = valid
         if compiled.ENABLED and self.has_compiled_step:
-            if self._update_next:
+            if s.update_next:
                 self._compiled_update(Y, valid)
             else:
                 self._compiled_predict_update(Y, U, valid)
@@ -314,16 +316,17 @@ class Estimator(LiveAttributes, ABC):
             self._numpy_step(Y, U, valid)
         if self._gate_threshold is not None:
             self._book_gate(valid, self._gate_threshold)
-        if self._restarting:
-            self._fresh[:] = False
-            self._restarting = False
-        self._k += 1
-        self._update_next = False
+        if s.restarting:
+            s.fresh[:] = False
+            s.restarting = False
+        s.k += 1
+        s.update_next = False
 
     def _delayed_step(self, y: ArrayLike | None, u: ArrayLike | None) -> FloatArray:
         """:meth:`step` with a known delay (:mod:`.delay`): the lagged filter consumes
         ``y[k − d]`` with ``u[k − d − 1]`` where it has started, then every system's estimate
         is predicted to the current step."""
+        s = self._state
         Y, valid = self._measurement(y)
         U = self._no_input if u is None else self._input(u)
         line = self._line
@@ -342,13 +345,13 @@ class Estimator(LiveAttributes, ABC):
         line.age += 1
         steps = np.minimum(line.age - 1, line.delay)
         P_lagged = None if not self.provides_covariance else np.broadcast_to(
-            self._P, (self._n_b, *self._P.shape[1:]))
-        x_new, P_new = predict_ahead(self.model, self._x, P_lagged, line.window, steps)
+            s.P, (s.batch, *s.P.shape[1:]))
+        x_new, P_new = predict_ahead(self.model, s.x, P_lagged, line.window, steps)
         x_old, P_old = self._ahead
         finite = np.all(np.isfinite(x_new), axis=1)
         if P_new is not None:
             finite &= np.all(np.isfinite(P_new), axis=(1, 2))
-        self._diverged |= ~finite                      # a prediction that left the numbers
+        s.diverged |= ~finite                      # a prediction that left the numbers
         x_ahead = np.where(finite[:, None], x_new, x_old)
         P_ahead = P_old if P_new is None else np.where(finite[:, None, None], P_new, P_old)
         self._ahead = (x_ahead, P_ahead)
@@ -380,32 +383,34 @@ class Estimator(LiveAttributes, ABC):
     @property
     def x(self) -> FloatArray:
         """The current estimate (the prior mean before the first step); a copy."""
-        if not self._n_b:
+        if not self._state.batch:
             return self._x0.copy()
         if self._line is not None:
             return self._out(self._ahead[0])
-        return self._out(self._x)
+        return self._out(self._state.x)
 
     @property
     def P(self) -> FloatArray | None:
         """The current error covariance (the prior's before the first step; ``None`` for a
         filter without one, ``provides_covariance`` False); a copy."""
-        if not self._n_b:
+        s = self._state
+        if not s.batch:
             return self._P0.copy()
         if not self.provides_covariance:
             return None
         if self._line is not None:
             return self._out(self._ahead[1])
-        P = self._P if self._P.shape[0] == self._n_b else np.broadcast_to(
-            self._P, (self._n_b,) + self._P.shape[1:])
+        P = s.P if s.P.shape[0] == s.batch else np.broadcast_to(
+            s.P, (s.batch,) + s.P.shape[1:])
         return self._out(P)
 
     @property
     def diverged(self) -> bool | np.ndarray:
         """Sticky divergence flag: a bool, or a ``(B,)`` array for a batch."""
-        if not self._n_b:
+        s = self._state
+        if not s.batch:
             return False if not self._batched_prior else np.zeros(self._batch or 0, bool)
-        return bool(self._diverged[0]) if self._single else self._diverged.copy()
+        return bool(s.diverged[0]) if s.single else s.diverged.copy()
 
     @property
     def last_info(self) -> dict[str, Any]:
@@ -420,23 +425,24 @@ class Estimator(LiveAttributes, ABC):
         docstring, *Innovation gate*), and the filter's own keys (e.g. the windowed
         filters' ``startup`` and ``rank_deficient``).
         """
-        if not self._n_b or self._k == 0:
+        s = self._state
+        if not s.batch or s.k == 0:
             return {}
         nis: Any = None
         ll: Any = None
         if self.reports_nis:
-            nis = float(self._nis[0]) if self._single else self._nis.copy()
+            nis = float(s.nis[0]) if s.single else s.nis.copy()
         if self.reports_likelihood:
             lls = self._log_likelihoods()
-            ll = float(lls[0]) if self._single else lls
+            ll = float(lls[0]) if s.single else lls
         info = {"diverged": self.diverged, "nis": nis, "log_likelihood": ll,
                 **self._step_info()}
         if self._line is not None:
-            info["delayed_estimate"] = self._out(self._x)
+            info["delayed_estimate"] = self._out(s.x)
         if self._gate is not None:
-            info["gated"] = bool(self._gated[0]) if self._single else self._gated.copy()
-            info["gated_count"] = (int(self._gated_count[0]) if self._single
-                                   else self._gated_count.copy())
+            info["gated"] = bool(s.gated[0]) if s.single else s.gated.copy()
+            info["gated_count"] = (int(s.gated_count[0]) if s.single
+                                   else s.gated_count.copy())
         return info
 
     def _book_gate(self, valid: np.ndarray, threshold: float) -> None:
@@ -444,17 +450,18 @@ class Estimator(LiveAttributes, ABC):
         — the ones the step rejected: every path decides on that very comparison, and the NIS
         is NaN where no measurement was usable — are counted, and their log-likelihood is 0.
         One system takes no array operation (a few µs of a step of a few µs)."""
-        if self._n_b == 1:
-            gated = bool(self._nis[0] > threshold)
-            self._gated[0] = gated
+        s = self._state
+        if s.batch == 1:
+            gated = bool(s.nis[0] > threshold)
+            s.gated[0] = gated
             if gated:
-                self._gated_count[0] += 1
+                s.gated_count[0] += 1
                 self._last_valid = np.zeros(1, bool)
             return
-        self._gated = self._nis > threshold
-        if self._gated.any():
-            self._gated_count += self._gated
-            self._last_valid = valid & ~self._gated
+        s.gated = s.nis > threshold
+        if s.gated.any():
+            s.gated_count += s.gated
+            self._last_valid = valid & ~s.gated
 
     def _log_likelihoods(self) -> FloatArray:
         """``(B,)`` Gaussian log-likelihood of the last innovation of every system: 0 where
@@ -462,13 +469,13 @@ class Estimator(LiveAttributes, ABC):
         definite (module docstring, *Divergence*)."""
         m = self._n_y
         with np.errstate(invalid="ignore"):
-            ll = -0.5 * (self._nis + self._logdet + m * _LOG_2PI)
+            ll = -0.5 * (self._state.nis + self._state.logdet + m * _LOG_2PI)
         return np.where(self._last_valid, np.where(np.isfinite(ll), ll, -np.inf), 0.0)
 
     @property
     def time_step(self) -> int:
         """Number of measurements consumed since ``reset``."""
-        return self._k
+        return self._state.k
 
     # ------------------------------------------------------------------ to implement
     def _reset_state(self) -> None:
@@ -516,17 +523,18 @@ class Estimator(LiveAttributes, ABC):
 
     # ------------------------------------------------------------------ the numpy step
     def _numpy_step(self, Y: FloatArray, U: FloatArray, valid: np.ndarray) -> None:
+        s = self._state
         with np.errstate(all="ignore"):
-            if self._update_next:
-                out = self._update(self._x, self._P, Y, valid)
+            if s.update_next:
+                out = self._update(s.x, s.P, Y, valid)
             else:
-                x_prior, P_prior = self._x, self._P
+                x_prior, P_prior = s.x, s.P
                 out = self._predict_update(x_prior, P_prior, Y, U, valid)
-                if self._restarting:
+                if s.restarting:
                     out = self._first_steps(*_four(out), x_prior, P_prior, Y, valid)
             x, P, nis, logdet = _four(out)
             self._accept(x, P, nis, valid)
-            self._logdet[:] = np.nan if logdet is None else logdet
+            s.logdet[:] = np.nan if logdet is None else logdet
 
     def _accept(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                 valid: np.ndarray) -> None:
@@ -538,16 +546,17 @@ class Estimator(LiveAttributes, ABC):
         nis``; only when one of them fails are the exact per-system masks computed. A
         covariance shared by the batch (``P`` of one row) is stored where it is finite.
         """
+        s = self._state
         n = x.shape[1]
         fine = math.isfinite(x.sum()) and (
             P is None or bool(abs(P).max() * n <= self.max_covariance_trace))
         if fine and nis is not None:
-            fine = bool(nis.max() <= self._nis_threshold) and not self._nis_run.any()
+            fine = bool(nis.max() <= self._nis_threshold) and not s.nis_run.any()
         if fine:
-            self._x = _owned(x)
+            s.x = _owned(x)
             if P is not None:
-                self._P = _owned(P)
-            self._nis[:] = np.nan if nis is None else nis
+                s.P = _owned(P)
+            s.nis[:] = np.nan if nis is None else nis
             return
         finite = np.all(np.isfinite(x), axis=1)
         blown = ~finite
@@ -558,20 +567,20 @@ class Estimator(LiveAttributes, ABC):
             blown = ~finite | (np.where(finite, trace, 0.0) > self.max_covariance_trace)
         if nis is not None:
             high = valid & ~(nis <= self._nis_threshold)      # NaN counts as above
-            self._nis_run = np.where(high, self._nis_run + 1, 0)
-            blown |= self._nis_run >= self.nis_patience
-        self._diverged |= blown
-        self._x = np.where(finite[:, None], x, self._x)
+            s.nis_run = np.where(high, s.nis_run + 1, 0)
+            blown |= s.nis_run >= self.nis_patience
+        s.diverged |= blown
+        s.x = np.where(finite[:, None], x, s.x)
         if P is not None:
             keep = finite_P if P.shape[0] < x.shape[0] else finite
-            self._P = np.where(keep[:, None, None], P, self._P)
-        self._nis[:] = np.nan if nis is None else nis
+            s.P = np.where(keep[:, None, None], P, s.P)
+        s.nis[:] = np.nan if nis is None else nis
 
     def _first_steps(self, x: FloatArray, P: FloatArray | None, nis: FloatArray | None,
                      logdet: FloatArray | None, x_prior: FloatArray, P_prior: FloatArray,
                      Y: FloatArray, valid: np.ndarray) -> StepResult:
         """Replace the rows of restarted systems by their first step (an update only)."""
-        idx = np.flatnonzero(self._fresh)
+        idx = np.flatnonzero(self._state.fresh)
         xs, Ps, ns, lds = _four(self._update_systems(idx, x_prior[idx], P_prior[idx], Y[idx],
                                                      valid[idx]))
         x = np.array(x)
@@ -591,6 +600,7 @@ class Estimator(LiveAttributes, ABC):
     def _measurement(self, y: ArrayLike | None) -> tuple[FloatArray, np.ndarray]:
         """``y`` as ``(B, n_y)`` float64 and the mask of usable rows (``nan_policy``; ``None``
         and masked entries are missing whatever the policy)."""
+        s = self._state
         if type(y) is not np.ndarray or y.dtype is not _F64:
             if y is None:
                 return self._no_measurement()
@@ -598,11 +608,13 @@ class Estimator(LiveAttributes, ABC):
                 return self._masked_measurement(y)
             y = real_array("y", y)
         if y.shape == self._y_shape:
-            Y = y[None] if self._single else y
+            Y = y[None] if s.single else y
         else:
             Y = self._first_measurement(y)
         if _all_finite(Y):
+            s.every_usable = True
             return Y, self._all_valid
+        s.every_usable = False
         valid = np.all(np.isfinite(Y), axis=1)
         if self.nan_policy == "raise":
             raise ValueError("y must be finite (nan_policy='raise'); got NaN or inf in the "
@@ -612,9 +624,11 @@ class Estimator(LiveAttributes, ABC):
     def _no_measurement(self) -> tuple[FloatArray, np.ndarray]:
         """``step(None)``: no system has a measurement (before the first step: one system, or
         the batched prior's batch)."""
-        if not self._n_b:
+        s = self._state
+        if not s.batch:
             self._ensure_batch(self._batch or 1, self._batch is None)
-        return np.zeros((self._n_b, self._n_y)), np.zeros(self._n_b, bool)
+        s.every_usable = False
+        return np.zeros((s.batch, self._n_y)), np.zeros(s.batch, bool)
 
     def _masked_measurement(self, y: np.ma.MaskedArray) -> tuple[FloatArray, np.ndarray]:
         """A masked array: a system with any masked entry has no measurement this step."""
@@ -625,19 +639,21 @@ class Estimator(LiveAttributes, ABC):
         if not mask.any():
             return Y, valid
         missing = mask.reshape(Y.shape).any(axis=1)
+        self._state.every_usable = False
         return Y, valid & ~missing
 
     def _first_measurement(self, y: FloatArray) -> FloatArray:
         """A measurement of a shape not yet seen: the first one (which fixes the batch), a
         scalar for ``n_y = 1``, or an error."""
+        s = self._state
         n_y = self._n_y
         Y = as_batch("y", y, n_y)                      # raises on a wrong shape
         single = Y.ndim == 1
         Y = Y.reshape(1, n_y) if single else Y
-        if not self._n_b:
+        if not s.batch:
             self._ensure_batch(Y.shape[0], single)
-        elif Y.shape[0] != self._n_b or single != self._single:
-            want = f"({n_y},)" if self._single else f"({self._n_b}, {n_y})"
+        elif Y.shape[0] != s.batch or single != s.single:
+            want = f"({n_y},)" if s.single else f"({s.batch}, {n_y})"
             raise ValueError(f"y must have shape {want} like the earlier measurements; got "
                              f"{'a single measurement' if single else f'a batch of {len(Y)}'}")
         return Y
@@ -659,23 +675,16 @@ class Estimator(LiveAttributes, ABC):
         return U
 
     def _ensure_batch(self, n_batch: int, single: bool) -> None:
+        s = self._state
         if self._batch is not None and (single or n_batch != self._batch):
             raise ValueError(f"y must have shape ({self._batch}, {self.model.n_y}) to match the "
                              f"batched prior; got {'a single measurement' if single else n_batch}")
-        self._single = single and self._batch is None
-        self._n_b = n_batch
-        self._y_shape = (self._n_y,) if self._single else (n_batch, self._n_y)
+        s.single = single and self._batch is None
+        s.batch = n_batch
+        self._y_shape = (self._n_y,) if s.single else (n_batch, self._n_y)
         n = self.model.n_x
-        self._x = np.array(np.broadcast_to(self._x0, (n_batch, n)), order="C")
-        self._P = np.array(np.broadcast_to(self._P0, (n_batch, n, n)), order="C")
-        self._diverged = np.zeros(n_batch, bool)
-        self._nis_run = np.zeros(n_batch, np.int64)
-        self._nis = np.full(n_batch, np.nan)
-        #: ``log det S`` of each system's last innovation (NaN where none)
-        self._logdet = np.full(n_batch, np.nan)
-        self._fresh = np.zeros(n_batch, bool)
-        self._gated = np.zeros(n_batch, bool)
-        self._gated_count = np.zeros(n_batch, np.int64)
+        s.allocate(np.broadcast_to(self._x0, (n_batch, n)),
+                             np.broadcast_to(self._P0, (n_batch, n, n)))
         self._all_valid = np.ones(n_batch, bool)
         self._last_valid = self._all_valid
         #: ``predict`` masks of the compiled twins: every system, none (the first step)
@@ -685,17 +694,18 @@ class Estimator(LiveAttributes, ABC):
         self._init_batch(n_batch)
         if self._delay:
             self._line = DelayLine(self._delay, n_batch, self.model.n_u)
-            self._ahead = (self._x.copy(), np.array(np.broadcast_to(
-                self._P, (n_batch, n, n)), order="C"))
+            self._ahead = (s.x.copy(), np.array(np.broadcast_to(
+                s.P, (n_batch, n, n)), order="C"))
 
     def _predicting(self) -> np.ndarray:
         """The systems that predict this step (the compiled twins' ``predict`` mask)."""
-        if self._update_next:
+        s = self._state
+        if s.update_next:
             return self._none_predict
-        return ~self._fresh if self._restarting else self._all_predict
+        return ~s.fresh if s.restarting else self._all_predict
 
     def _out(self, a: FloatArray) -> FloatArray:
-        return a[0].copy() if self._single else a.copy()
+        return a[0].copy() if self._state.single else a.copy()
 
 
 def _four(out: StepResult) -> tuple[Any, Any, Any, Any]:

@@ -299,13 +299,13 @@ class BlockPulseKalmanFilter(ContinuousEstimator):
         """As :meth:`Estimator.step`; a global-recursion breakdown also sets ``diverged``."""
         x = super().step(y, u)
         if self._broken is not None and self._broken.any():
-            self._diverged |= self._broken
+            self._state.diverged |= self._broken
         return x
 
     def _step_info(self) -> dict[str, Any]:
         if self._broken is None or self._condition is None:
             return {}
-        if self._single:
+        if self._state.single:
             return {"riccati_breakdown": bool(self._broken[0]),
                     "riccati_condition": float(self._condition[0])}
         return {"riccati_breakdown": self._broken.copy(),

@@ -145,14 +145,14 @@ class ExtendedFIRFilter(WindowedEstimator):
         if self._nom is None:
             return None
         nom = self._nom if self._nom.ndim == 2 else self._nom[:, self._k_last % self.horizon]
-        return nom[0].copy() if self._single else nom.copy()
+        return nom[0].copy() if self._state.single else nom.copy()
 
     def _innovation_terms(self, y: FloatArray, u: FloatArray | None, predict: np.ndarray,
                           x: FloatArray) -> InnovationTerms:
         """The model along the previous estimate: ``x⁻ = f(x̂, u)``, ``A = F(x̂, u)``,
         ``e = y − h(x⁻)``, ``H(x⁻)`` — the EKF's prediction from the EFIR's estimate."""
         n = x.shape[1]
-        if self._k and predict.any():
+        if self._state.k and predict.any():
             x_pred, A = self._linearize(x, u)
             if not predict.all():
                 x_pred = np.where(predict[:, None], x_pred, x)
@@ -169,16 +169,17 @@ class ExtendedFIRFilter(WindowedEstimator):
         self._k_last = 0
 
     def _init_batch(self, n_batch: int) -> None:
+        s = self._state
         n, L = self.model.n_x, self.horizon
         self._bank = WindowBank(n_batch, L, n)
-        self._P_open = self._P.copy()
+        self._P_open = s.P.copy()
         self._age = np.zeros(n_batch, int)            # measurements since (re)start
         self._in_startup = True                       # some system's window is not full
         self._no_startup = np.zeros(n_batch, bool)
         if self.nominal == "open-loop":
-            self._nom = self._x.copy()
+            self._nom = s.x.copy()
         else:
-            self._nom = np.repeat(self._x[:, None, :], L, axis=1)
+            self._nom = np.repeat(s.x[:, None, :], L, axis=1)
 
     def _restart_systems(self, mask: np.ndarray) -> None:
         super()._restart_systems(mask)
@@ -186,7 +187,7 @@ class ExtendedFIRFilter(WindowedEstimator):
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:
-        bank, k, L = self._bank, self._k, self.horizon
+        bank, k, L = self._bank, self._state.k, self.horizon
         assert bank is not None and self._nom is not None
         nb, n = y.shape[0], self.model.n_x
         filt = self.form == "filter"
@@ -213,12 +214,12 @@ class ExtendedFIRFilter(WindowedEstimator):
             x0 = np.broadcast_to(self._x0, (nb, n))[fresh]
             self._nom[fresh] = x0 if self._nom.ndim == 2 else x0[:, None, :]
             self._P_open[fresh] = np.broadcast_to(self._P0, (nb, n, n))[fresh]
-            bank.Z[fresh] = bank._fresh[None, :, None, :]
+            bank.Z[fresh] = bank.blank[None, :, None, :]
         s = k % L
         if not filt:
             x, P, ok = self._readout(w_out, u, start)
         if self._nom.ndim == 3:                        # re-anchor the window starting now
-            anchor = x if not filt else (self._f(self._x, u) if k else self._x)
+            anchor = x if not filt else (self._f(self._state.x, u) if k else self._state.x)
             if fresh is not None and filt:
                 anchor = np.where(fresh[:, None], self._nom[:, s], anchor)
             self._nom[:, s] = anchor
@@ -229,13 +230,13 @@ class ExtendedFIRFilter(WindowedEstimator):
             C, dy = C.reshape(nb, L, *C.shape[1:]), y[:, None, :] - h.reshape(nb, L, -1)
         else:
             dy = y - h
-        bank.update(C, self._R, dy, None if valid is getattr(self, "_all_valid", 0) else valid)
+        bank.update(C, self._R, dy, None if valid.all() else valid)
         if filt:
             x, P, ok = self._readout(w_out, u, start)
         self._age += 1
         self._last_xP = (x, P)
-        self._info = {"startup": bool(start[0]) if self._single else start.copy(),
-                      "rank_deficient": (not ok[0]) if self._single else ~ok}
+        self._info = {"startup": bool(start[0]) if self._state.single else start.copy(),
+                      "rank_deficient": (not ok[0]) if self._state.single else ~ok}
         self._k_last = k
         return x, P, None
 
@@ -246,6 +247,7 @@ class ExtendedFIRFilter(WindowedEstimator):
     def _readout(self, w: int, u: FloatArray | None, start: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, np.ndarray]:
         """Window ``w``'s estimate ``x_nom + δx̂``, with the documented fallback where singular."""
+        s = self._state
         dx, P, ok = self._bank.estimate(w)             # type: ignore[union-attr]
         if self.startup == "prior" and start.any():   # the window that began at x0
             n = dx.shape[1]
@@ -257,9 +259,9 @@ class ExtendedFIRFilter(WindowedEstimator):
         x = (self._nom if self._nom.ndim == 2 else self._nom[:, w]) + dx  # type: ignore
         if not ok.all():
             xf, Pf = self._nominal_of(w), self._P_open    # start-up: x0's nominal, P0 along it
-            if self._k and not start.all():
-                xp, A = self._linearize(self._x, u)
-                Pp = A @ self._P @ A.swapaxes(1, 2) + (0.0 if self._Qx is None else self._Qx)
+            if s.k and not start.all():
+                xp, A = self._linearize(s.x, u)
+                Pp = A @ s.P @ A.swapaxes(1, 2) + (0.0 if self._Qx is None else self._Qx)
                 xf = np.where(start[:, None], xf, xp)
                 Pf = np.where(start[:, None, None], Pf, Pp)
             x = np.where(ok[:, None], x, xf)

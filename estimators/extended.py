@@ -35,30 +35,14 @@ __all__ = ["ExtendedKalmanFilter", "model_callables", "model_linearizer"]
 
 
 def model_callables(model: StateSpaceModel) -> tuple[Any, Any, Any, Any]:
-    """The model's ``f, F, h, H`` for the hot path, skipping the per-call shape checks.
-
-    The model's public methods validate their arguments on every call; a filter
-    already holds arrays of the right shape, so it calls the plant's functions
-    directly. A model subclass that overrides a public method keeps it.
-    """
-    cls = type(model)
-    f = model._f if cls.f is StateSpaceModel.f else model.f
-    h = model._h if cls.h is StateSpaceModel.h else model.h
-    F = model._F if (cls.F is StateSpaceModel.F and model._F is not None) else model.F
-    H = model._H if (cls.H is StateSpaceModel.H and model._H is not None) else model.H
-    return f, F, h, H
+    """The model's ``f, F, h, H`` for the hot path (:meth:`StateSpaceModel.unchecked_callables`)."""
+    return model.unchecked_callables()
 
 
 def model_linearizer(model: StateSpaceModel) -> Any:
-    """``(x, u) -> (f(x, u), F(x, u))`` for the hot path: the model's fused ``fF`` when it has
-    one (one pass of the plant's integrator instead of two), else the model's own unchecked
-    pair (:meth:`StateSpaceModel.f_and_F`) — a bound method, so a filter holding it pickles."""
-    cls = type(model)
-    if cls.linearize is StateSpaceModel.linearize and getattr(model, "_fF", None) is not None:
-        return model._fF
-    if cls.linearize is not StateSpaceModel.linearize:
-        return model.linearize
-    return model.f_and_F
+    """``(x, u) -> (f(x, u), F(x, u))`` for the hot path
+    (:meth:`StateSpaceModel.unchecked_linearizer`)."""
+    return model.unchecked_linearizer()
 
 
 class ExtendedKalmanFilter(PublicSteps, Estimator):
@@ -101,12 +85,12 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         self._linearize = model_linearizer(model)
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R_batch = np.ascontiguousarray(model.R)[None]       # the compiled step's layout
-        self._plain_linear = _is_plain_linear(model, self._f, self._F, self._h, self._H)
+        self._plain_linear = isinstance(model, LinearModel) and model.is_plain
         if not self._plain_linear:
             check_model_batched(self)
         self._residual_x = getattr(model, "residual_x", None)
         self._residual_y = getattr(model, "residual_y", None)
-        if self._n_b:
+        if self._state.batch:
             self._bind_linear()
 
     def _init_batch(self, n_batch: int) -> None:
@@ -114,18 +98,19 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         if self._plain_linear and self._P0.ndim == 2:
             # the covariance recursion of a linear model does not depend on the data:
             # systems started from one prior share it (the KF's exact shortcut)
-            self._P = self._P0[None].copy()
+            self._state.P = self._P0[None].copy()
         self._bind_linear()
 
     def _bind_linear(self) -> None:
         """The matrices of a plain linear model's compiled step; a covariance shared by the
         batch becomes one per system when the model is not (or no longer) plain linear."""
+        s = self._state
         if self._plain_linear:
             model = cast(LinearModel, self.model)
             self._mats = StepMatrices(model.A, model.B, model.C, self._GQGt, model.R)
             self._gains = LinearGains(model.n_x, model.n_y, may_settle=False)  # no steady state
-        elif self._P.shape[0] < self._n_b:
-            self._P = np.repeat(self._P, self._n_b, axis=0)
+        elif s.P.shape[0] < s.batch:
+            s.P = np.repeat(s.P, s.batch, axis=0)
 
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
@@ -165,23 +150,25 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
         if self._plain_linear:
-            self._gains.step(self, self._mats, self._mats, self._no_input, y, valid)
+            self._gains.step(self._state, self._predicting(), self._mats, self._mats,
+                             self._no_input, y, valid)
             return
-        x = self._x
+        x = self._state.x
         with np.errstate(all="ignore"):
             hx, H = self._h(x), self._H(x)
         self._kalman_step(x, self._identity, y, hx, H, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
+        s = self._state
         if self._plain_linear:
-            self._gains.step(self, self._mats, self._mats, u, y, valid)
+            self._gains.step(s, self._predicting(), self._mats, self._mats, u, y, valid)
             return
-        x = self._x
+        x = s.x
         with np.errstate(all="ignore"):
             xp, F = self._linearize(x, u)
-            if self._restarting:                       # restarted systems: their prior
-                xp = np.where(self._fresh[:, None], x, xp)
+            if s.restarting:                       # restarted systems: their prior
+                xp = np.where(s.fresh[:, None], x, xp)
             hx, H = self._h(xp), self._H(xp)
         self._kalman_step(xp, F, y, hx, H, valid)
 
@@ -190,25 +177,13 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         """:func:`~.compiled.kalman.predict_update` on the model's values (a 2-D ``F`` or ``H``
         is shared by the batch). The kernel's innovation is ``y − hx``: with the model's
         ``residual_y`` it is handed ``hx + residual_y(y, hx)``."""
+        s = self._state
         if self._residual_y is not None:
             with np.errstate(all="ignore"):
                 y = hx + self._residual_y(y, hx)
         compiled_kalman.predict_update(
-            self._x, self._P, xp, F if F.ndim == 3 else F[None], self._GQGt, y, hx,
-            H if H.ndim == 3 else H[None], self._R_batch, valid, self._predicting(),
-            self._diverged, self._nis_run, self._nis, self._limits, self._logdet)
-
-
-
-def _is_plain_linear(model: StateSpaceModel, f: Any, F: Any, h: Any, H: Any) -> bool:
-    """Whether the callables are :class:`LinearModel`'s own (``A x + B u``, ``A``, ``C x``,
-    ``C``)."""
-    if not isinstance(model, LinearModel) or type(model).linearize is not LinearModel.linearize:
-        return False
-    own = (LinearModel._linear_f, LinearModel._linear_F, LinearModel._linear_h,
-           LinearModel._linear_H)
-    return all(getattr(c, "__func__", None) is o and getattr(c, "__self__", None) is model
-               for c, o in zip((f, F, h, H), own, strict=True))
+            s, xp, F if F.ndim == 3 else F[None], self._GQGt, y, hx,
+            H if H.ndim == 3 else H[None], self._R_batch, valid, self._predicting())
 
 
 register_estimator("ekf", ExtendedKalmanFilter)

@@ -164,7 +164,7 @@ class FIRFilter(WindowedEstimator):
         """The plant model's (``model``, not UFIR's ``Q = 0, R = I``) one-step prediction
         from the previous estimate: ``x⁻ = A x̂ + B u``, ``e = y − C x⁻`` (matrices of
         ``k − 1`` and ``k``; a time-invariant model's are prepared once)."""
-        k = self._k
+        k = self._state.k
         if self.time_invariant:
             terms = getattr(self, "_test_matrices", None)
             if terms is None:
@@ -200,7 +200,7 @@ class FIRFilter(WindowedEstimator):
         d = self._p + self._nu
         self._buf = np.zeros((n_batch, 2 * self._slots, d))
         self._vbuf = np.ones((n_batch, 2 * self._slots), bool)
-        self._x_open, self._P_open = self._x.copy(), self._P.copy()
+        self._x_open, self._P_open = self._state.x.copy(), self._state.P.copy()
         self._age = np.zeros(n_batch, int)            # measurements since (re)start
         if not self.time_invariant and self.gain == "two-stage":
             self._bank = WindowBank(n_batch, self.horizon, self._n)
@@ -209,7 +209,8 @@ class FIRFilter(WindowedEstimator):
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray
                  ) -> tuple[FloatArray, FloatArray, None]:
-        k, nb, n = self._k, y.shape[0], self._n
+        s = self._state
+        k, nb, n = s.k, y.shape[0], self._n
         mats = self._model.matrices(0 if self.time_invariant else k)  # type: ignore[attr-defined]
         prev = self._hist[-1] if self._hist else None
         self._evicted = self._hist[0] if len(self._hist) == self._slots else prev
@@ -244,8 +245,8 @@ class FIRFilter(WindowedEstimator):
             P = np.where(ok[:, None, None], P, 0.5 * (Pf + Pf.swapaxes(1, 2)))
         self._age += 1
         self._last_xP = (x, P)
-        self._info = {"startup": bool(start[0]) if self._single else start,
-                      "rank_deficient": (not ok[0]) if self._single else ~ok}
+        self._info = {"startup": bool(start[0]) if s.single else start,
+                      "rank_deficient": (not ok[0]) if s.single else ~ok}
         return x, P, None
 
     def _fallback(self, start: np.ndarray, prev: Any, Bu: FloatArray | None
@@ -253,12 +254,12 @@ class FIRFilter(WindowedEstimator):
         """Start-up: the propagated prior; later: the previous estimate predicted."""
         if prev is None or start.all():
             return self._x_open, self._P_open
-        x, P = _predict(prev, self._x, self._P, Bu)
+        x, P = _predict(prev, self._state.x, self._state.P, Bu)
         return (np.where(start[:, None], self._x_open, x),
                 np.where(start[:, None, None], self._P_open, P))
 
     def _push(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray) -> None:
-        pos, s, p = self._k % self._slots, self._slots, self._p
+        pos, s, p = self._state.k % self._slots, self._slots, self._p
         for q in (pos, pos + s):
             self._buf[:, q, :p] = y
             self._buf[:, q, p:] = 0.0 if u is None else u
@@ -266,7 +267,7 @@ class FIRFilter(WindowedEstimator):
 
     def _window_data(self, h: int) -> tuple[FloatArray, np.ndarray]:
         """The last ``h`` slots ``[y_t, u_{t−1}]`` (oldest first) and their y-validity."""
-        end = self._k % self._slots + self._slots + 1
+        end = self._state.k % self._slots + self._slots + 1
         return self._buf[:, end - h:end], self._vbuf[:, end - h:end]
 
     def _bank_step(self, bank: WindowBank, mats: Any, prev: Any, y: FloatArray,
@@ -278,13 +279,13 @@ class FIRFilter(WindowedEstimator):
         bank (``W = 1``) only restarts systems that are ``fresh`` (restarted) or
         ``idle`` (past start-up, kept clean), so for the others it grows.
         """
-        k, W = self._k, bank.W
+        k, W = self._state.k, bank.W
         if prev is not None:
             Qx = prev.G @ prev.Q @ prev.G.T
             bank.predict(prev.A[None], Bu, Qx if np.any(Qx) else None)
         clear = fresh if idle is None else (idle if fresh is None else idle | fresh)
         if clear is not None and clear.any():
-            bank.Z[clear] = bank._fresh[None, :, None, :]
+            bank.Z[clear] = bank.blank[None, :, None, :]
         smoother = self._smoother
         if self.form == "predictor":
             x, P, ok = bank.estimate(max(0, k - W) % W, smoother, self._prior)
@@ -296,7 +297,7 @@ class FIRFilter(WindowedEstimator):
         return x, P, ok
 
     def _gain_step(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
-        h = min(self._k + (self.form == "filter"), self.horizon)
+        h = min(self._state.k + (self.form == "filter"), self.horizon)
         nb, n = self._buf.shape[0], self._n
         win: Window | None
         if self.time_invariant:

@@ -84,13 +84,13 @@ class FIRSmoother(FIRFilter):
 
     def _init_batch(self, n_batch: int) -> None:
         super()._init_batch(n_batch)
-        self._x_test, self._P_test = self._x.copy(), self._P.copy()
+        self._x_test, self._P_test = self._state.x.copy(), self._state.P.copy()
         self._test_ok = np.ones(n_batch, bool)
 
     def _consistency_prior(self) -> tuple[FloatArray, FloatArray, np.ndarray | None]:
         x, P, ok = self._x_test, self._P_test, self._test_ok
-        if self._restarting:                           # restarted systems: their prior
-            fresh = self._fresh
+        if self._state.restarting:                           # restarted systems: their prior
+            fresh = self._state.fresh
             nb, n = x.shape
             x = np.where(fresh[:, None], np.broadcast_to(self._x0, (nb, n)), x)
             P = np.where(fresh[:, None, None], np.broadcast_to(self._P0, (nb, n, n)), P)
@@ -119,7 +119,7 @@ class FIRSmoother(FIRFilter):
 
     def _step_info(self) -> dict[str, Any]:
         t = np.maximum(0, self._age - self.horizon)         # steps since (re)start − lag
-        return {**super()._step_info(), "time": int(t[0]) if self._single else t}
+        return {**super()._step_info(), "time": int(t[0]) if self._state.single else t}
 
     def _fallback(self, start: np.ndarray, prev: Any, Bu: FloatArray | None
                   ) -> tuple[FloatArray, FloatArray]:
@@ -132,8 +132,8 @@ class FIRSmoother(FIRFilter):
         assert m is not None
         Z, _ = self._window_data(self._slots)
         u_old = Z[:, 0, self._p:]                          # u[k − L]
-        x = self._x @ m.A.T + u_old @ m.B.T
-        P = m.A @ self._P @ m.A.T + m.G @ m.Q @ m.G.T
+        x = self._state.x @ m.A.T + u_old @ m.B.T
+        P = m.A @ self._state.P @ m.A.T + m.G @ m.Q @ m.G.T
         return np.where(start[:, None], x0, x), np.where(start[:, None, None], P0, P)
 
 

@@ -44,6 +44,7 @@ from .public_steps import PublicSteps
 from .registry import register_estimator
 from .sequences import SmootherResult
 from .smoothers import smooth_sequence
+from .state import FilterState
 
 __all__ = ["Innovation", "KalmanFilter", "kf_predict", "kf_update"]
 
@@ -330,7 +331,7 @@ class KalmanFilter(PublicSteps, Estimator):
 
     def _init_batch(self, n_batch: int) -> None:
         if self._P0.ndim == 2:                         # one covariance for the whole batch
-            self._P = self._P0[None].copy()
+            self._state.P = self._P0[None].copy()
 
     def _restart_systems(self, mask: np.ndarray) -> None:
         self._gains.regime[0] = 0
@@ -343,15 +344,16 @@ class KalmanFilter(PublicSteps, Estimator):
     # ------------------------------------------------------------------ numpy reference
     def _update(self, x: FloatArray, P: FloatArray, y: FloatArray, valid: np.ndarray
                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        x, P, nis, _, W = self._correct(x, P, y, valid, self._matrices(self._k))
+        x, P, nis, _, W = self._correct(x, P, y, valid, self._matrices(self._state.k))
         return x, P, nis, logdet_of_inverse(W, x.shape[0])
 
     def _predict_update(self, x: FloatArray, P: FloatArray, y: FloatArray, u: FloatArray,
                         valid: np.ndarray
                         ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        A, B, _, Qd, _ = self._matrices(self._k - 1)
+        s = self._state
+        A, B, _, Qd, _ = self._matrices(s.k - 1)
         x = x @ A.T + u @ B.T                          # x⁻ = A x + B u
-        every = valid is self._all_valid and not self._restarting
+        every = s.every_usable and not s.restarting
         gains = self._gains
         if gains.regime[0] and every:                  # steady state: P, K, S⁻¹ kept
             K, W = gains.K.transpose(2, 0, 1), gains.W.transpose(2, 0, 1)
@@ -362,7 +364,7 @@ class KalmanFilter(PublicSteps, Estimator):
             # the gate rejects a measurement: its system needs its own P⁻, which the steady
             # state does not hold — the step again in full (class docstring)
         gains.regime[0] = 0
-        mats = self._matrices(self._k)
+        mats = self._matrices(s.k)
         x_new, P_new, nis, K, W = self._correct(x, predict_covariance(P, A, Qd), y, valid,
                                                 mats)
         if (gains.regime[1] and every and K is not None and _converged(P_new, P)
@@ -379,7 +381,7 @@ class KalmanFilter(PublicSteps, Estimator):
         C, R = mats.C, mats.R
         e = y - x @ C.T
         gate = self._gate_threshold
-        if valid is self._all_valid:
+        if self._state.every_usable:
             K, W, P_new = gain_kernel(P, C, R)
             x_new, nis = correct(x, e, K, W)
             if not _fires(nis, gate):
@@ -405,13 +407,14 @@ class KalmanFilter(PublicSteps, Estimator):
 
     # ------------------------------------------------------------------ compiled twin
     def _compiled_update(self, y: FloatArray, valid: np.ndarray) -> None:
-        mats = self._matrices(self._k)
-        self._gains.step(self, mats, mats, self._no_input, y, valid)
+        mats = self._matrices(self._state.k)
+        self._gains.step(self._state, self._predicting(), mats, mats, self._no_input, y, valid)
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
-        self._gains.step(self, self._matrices(self._k - 1), self._matrices(self._k), u, y,
-                         valid)
+        k = self._state.k
+        self._gains.step(self._state, self._predicting(), self._matrices(k - 1),
+                         self._matrices(k), u, y, valid)
 
 
 class LinearGains:
@@ -430,32 +433,30 @@ class LinearGains:
         self.K, self.W = np.zeros((n, m, 0)), np.zeros((m, m, 0))
         self.regime = np.array([0, int(may_settle)], dtype=np.int64)
 
-    def step(self, flt: Estimator, prediction: StepMatrices, update: StepMatrices,
-             u: FloatArray, y: FloatArray, valid: np.ndarray) -> None:
-        """One step of ``flt``: predict with ``prediction``'s matrices, update with
-        ``update``'s."""
-        x, P = flt._x, flt._P
-        if valid is not flt._all_valid:                # a missing measurement: no shortcuts
+    def step(self, state: FilterState, predict: np.ndarray, prediction: StepMatrices,
+             update: StepMatrices, u: FloatArray, y: FloatArray, valid: np.ndarray) -> None:
+        """One step of the filter whose record is ``state``: predict the systems ``predict``
+        with ``prediction``'s matrices, update with ``update``'s."""
+        n_b = state.x.shape[0]
+        if not state.every_usable:                     # a missing measurement: no shortcuts
             self.regime[0] = 0
-            if P.shape[0] < x.shape[0]:
-                P = flt._P = np.repeat(P, x.shape[0], axis=0)
+            if state.P.shape[0] < n_b:
+                state.P = np.repeat(state.P, n_b, axis=0)
         while True:
-            if self.K.shape[2] != P.shape[0]:
+            rows = state.P.shape[0]
+            if self.K.shape[2] != rows:
                 self.regime[0] = 0
-                self.K = np.zeros(self.K.shape[:2] + P.shape[:1])
-                self.W = np.zeros(self.W.shape[:2] + P.shape[:1])
-            if compiled_kalman.linear_step(x, P, prediction.A, prediction.B, u, update.C,
-                                           prediction.Qd, update.R, y, valid,
-                                           flt._predicting(), self.K, self.W, self.regime,
-                                           flt._diverged, flt._nis_run, flt._nis, flt._limits,
-                                           flt._logdet):
+                self.K = np.zeros((*self.K.shape[:2], rows))
+                self.W = np.zeros((*self.W.shape[:2], rows))
+            if compiled_kalman.linear_step(state, self, prediction, update, u, y, valid,
+                                           predict):
                 return
             # the gate fired under a shortcut and nothing was written: the step again without
             # it, in the numpy reference's order (out of the steady state, then a P per system)
             if self.regime[0]:
                 self.regime[0] = 0
             else:
-                P = flt._P = np.repeat(P, x.shape[0], axis=0)
+                state.P = np.repeat(state.P, n_b, axis=0)
 
 
 class _Scheduled(Protocol):

@@ -46,7 +46,7 @@ class LinearizedKalmanFilter(PublicSteps, Estimator):
     _x_nom: FloatArray
 
     def _init_batch(self, n_batch: int) -> None:
-        self._x_nom = self._x.copy()
+        self._x_nom = self._state.x.copy()
 
     def _reset_state(self) -> None:
         self._x_nom = np.empty((0, self.model.n_x))
@@ -91,14 +91,15 @@ class LinearizedKalmanFilter(PublicSteps, Estimator):
 
     def _compiled_step(self, y: FloatArray, u: FloatArray, valid: np.ndarray, predict: bool
                        ) -> None:
-        model, x, nom = self.model, self._x, self._x_nom
+        s = self._state
+        model, x, nom = self.model, s.x, self._x_nom
         with np.errstate(all="ignore"):
             if predict:                                # the nominal moves on, open loop
                 F = model.F(nom, u)
                 nom_next = model.f(nom, u)
                 xp = nom_next + (F @ (x - nom)[:, :, None])[:, :, 0]   # x_nom + F δx
-                if self._restarting:                   # a restarted nominal starts again
-                    fresh = self._fresh[:, None]
+                if s.restarting:                   # a restarted nominal starts again
+                    fresh = s.fresh[:, None]
                     nom_next = np.where(fresh, x, nom_next)
                     xp = np.where(fresh, x, xp)
                 self._x_nom = nom_next
@@ -106,17 +107,15 @@ class LinearizedKalmanFilter(PublicSteps, Estimator):
                 F, nom_next, xp = np.eye(model.n_x)[None], nom, x
             H = model.H(nom_next)
             hx = model.h(nom_next) + (H @ (xp - nom_next)[:, :, None])[:, :, 0]
-        compiled_kalman.predict_update(x, self._P, xp, F, self._GQGt, y, hx, H,
-                                       self._R_batch, valid, self._predicting(),
-                                       self._diverged, self._nis_run, self._nis, self._limits,
-                                       self._logdet)
+        compiled_kalman.predict_update(s, xp, F, self._GQGt, y, hx, H, self._R_batch, valid,
+                                       self._predicting())
 
     @property
     def x_nominal(self) -> FloatArray | None:
         """The nominal trajectory's current point (``None`` before the first step)."""
-        if not self._n_b:
+        if not self._state.batch:
             return None
-        return self._x_nom[0].copy() if self._single else self._x_nom.copy()
+        return self._x_nom[0].copy() if self._state.single else self._x_nom.copy()
 
 
 register_estimator("lkf", LinearizedKalmanFilter)

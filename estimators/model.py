@@ -216,6 +216,34 @@ class StateSpaceModel(_ModelCore):
             return fx, self._F(x, u)
         return fx, self.F(x, u)
 
+    def unchecked_callables(self) -> tuple[Callable[..., FloatArray], Callable[..., FloatArray],
+                                           Callable[..., FloatArray], Callable[..., FloatArray]]:
+        """The model's ``f, F, h, H`` for a filter's hot path, without the per-call checks.
+
+        The public methods validate their arguments on every call; a filter already holds
+        arrays of the right shapes, so it calls the plant's own functions. A subclass that
+        overrides a public method keeps it; a missing Jacobian is the finite differences of
+        :meth:`F` / :meth:`H`.
+        """
+        cls = type(self)
+        f = self._f if cls.f is StateSpaceModel.f else self.f
+        h = self._h if cls.h is StateSpaceModel.h else self.h
+        F = self._F if (cls.F is StateSpaceModel.F and self._F is not None) else self.F
+        H = self._H if (cls.H is StateSpaceModel.H and self._H is not None) else self.H
+        return f, F, h, H
+
+    def unchecked_linearizer(self) -> Callable[..., tuple[FloatArray, FloatArray]]:
+        """``(x, u) -> (f(x, u), F(x, u))`` for a filter's hot path: the fused ``fF`` when the
+        model has one (one pass of the plant's integrator instead of two), a subclass's own
+        :meth:`linearize`, else :meth:`f_and_F` — a bound method or the model's own
+        callable, so a filter holding it copies and pickles with its model."""
+        cls = type(self)
+        if cls.linearize is StateSpaceModel.linearize and self._fF is not None:
+            return self._fF
+        if cls.linearize is not StateSpaceModel.linearize:
+            return self.linearize
+        return self.f_and_F
+
     # ------------------------------------------------------------------ properties
 
     @property
@@ -331,6 +359,18 @@ class LinearModel(StateSpaceModel):
     def __reduce__(self) -> tuple[Any, ...]:
         # Bound methods of self are stored as callables; rebuild from matrices instead.
         return (_rebuild_linear, (self._constructor_kwargs(),))
+
+    @property
+    def is_plain(self) -> bool:
+        """Whether the model's hot-path ``f, F, h, H`` (:meth:`unchecked_callables`) and its
+        :meth:`linearize` are this class's own — ``A x + B u``, ``A``, ``C x``, ``C`` — so that
+        a filter may step with the matrices directly (a subclass overriding one is not)."""
+        if type(self).linearize is not LinearModel.linearize:
+            return False
+        own = (LinearModel._linear_f, LinearModel._linear_F, LinearModel._linear_h,
+               LinearModel._linear_H)
+        return all(getattr(c, "__func__", None) is o and getattr(c, "__self__", None) is self
+                   for c, o in zip(self.unchecked_callables(), own, strict=True))
 
 
 def _rebuild_linear(kwargs: dict[str, Any]) -> LinearModel:

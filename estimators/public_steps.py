@@ -44,20 +44,8 @@ class PublicSteps:
         """
         est: Estimator = self  # type: ignore[assignment]
         _undelayed(est, "predict")
-        k, pending, run = est._k, est._update_next, est._nis_run.copy()
-        est._update_next = False                       # the prediction branch, A(k-1) of k >= 1
-        est._k = max(k, 1)
-        try:
-            x = est.step(None, u)                      # a step without a measurement
-        except BaseException:
-            est._update_next = pending
-            raise
-        finally:
-            est._k = k
-            if est._nis_run.shape == run.shape:
-                est._nis_run[:] = run
-        est._update_next = True
-        return x
+        with est.state.branch(update_only=False, keep_nis_run=True):
+            return est.step(None, u)                   # a step without a measurement
 
     def update(self, y: ArrayLike | None, R: ArrayLike | Callable[[FloatArray], Any] | None = None,
                H: ArrayLike | None = None) -> FloatArray:
@@ -87,19 +75,9 @@ class PublicSteps:
                 raise TypeError(f"H: {type(self).__name__} linearises model.h; a per-call H is a "
                                 f"KalmanFilter option (pass R only, or change model.h)")
             changes[self.per_call_H] = as_matrix("H", H, (model.n_y, model.n_x))
-        if changes:
-            est._filter_model = model.replace(**changes)
-            est._model_changed()
-        pending, est._update_next = est._update_next, True
-        try:
+        with est._stepping_with(model.replace(**changes) if changes else None), \
+                est.state.branch(update_only=True):
             return est.step(y)
-        except BaseException:
-            est._update_next = pending
-            raise
-        finally:
-            if changes:
-                est._filter_model = model
-                est._model_changed()
 
 
 def _undelayed(est: Estimator, name: str) -> None:

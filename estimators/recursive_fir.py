@@ -158,7 +158,7 @@ class RecursiveFIRFilter(FIRFilter):
         if self._fs is None:
             return None
         s = self._fs[:, self._n:]
-        return s[0].copy() if self._single else s.copy()
+        return s[0].copy() if self._state.single else s.copy()
 
     def _reset_state(self) -> None:
         super()._reset_state()
@@ -171,7 +171,7 @@ class RecursiveFIRFilter(FIRFilter):
 
     def _step_info(self) -> dict[str, Any]:
         r = self._info_reinit
-        reinit = bool(np.asarray(r).ravel()[0]) if self._single else np.array(r)
+        reinit = bool(np.asarray(r).ravel()[0]) if self._state.single else np.array(r)
         return {**super()._step_info(), "reinitialised": reinit}
 
     def _advance(self, y: FloatArray, u: FloatArray | None, valid: np.ndarray

@@ -124,8 +124,9 @@ def filter_sequence(est: Estimator, ys: ArrayLike, us: ArrayLike | None = None
     if U is not None and U.ndim == 3 and U.shape[1] != batch:
         raise ValueError(f"us must have shape (T - 1, {est.model.n_u}) or (T - 1, B, "
                          f"{est.model.n_u}) with the B = {batch} systems of ys; got {U.shape}")
-    seen = est._n_b and (None if est._single else est._n_b)
-    if est._n_b and seen != batch:
+    state = est.state
+    seen = state.batch and (None if state.single else state.batch)
+    if state.batch and seen != batch:
         raise ValueError(f"ys must be {'unbatched' if seen is None else f'a batch of {seen}'} "
                          f"like the measurements this filter has seen (it continues from its "
                          f"state); got {'unbatched' if batch is None else f'a batch of {batch}'}"

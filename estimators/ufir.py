@@ -142,7 +142,7 @@ class UFIRFilter(FIRFilter):
         return ufir_gain(win, self._target)
 
     def _gain_step(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
-        h = min(self._k + (self.form == "filter"), self.horizon)
+        h = min(self._state.k + (self.form == "filter"), self.horizon)
         Z, V = self._window_data(h + (self.form == "predictor"))
         if self.method == "batch" or h == 0 or not V[:, :h].all():
             return super()._gain_step()

@@ -305,7 +305,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
                              f"got n = {points.n}")
         self._points = points
         if getattr(self, "_n_b", 0):
-            self._init_batch(self._n_b)
+            self._init_batch(self._state.batch)
 
     @property
     def jitter(self) -> float:
@@ -420,7 +420,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         if self._hooked:
             self._numpy_step(y, self._no_input, valid)
             return
-        x, P, sp = self._x, self._P, self.points
+        x, P, sp = self._state.x, self._state.P, self.points
         assert x is not None and P is not None
         X = compiled_unscented.sigma_points(x, P, sp.xi, self.jitter)
         self._compiled_correct(x, P, X, y, valid)
@@ -430,7 +430,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         if self._hooked:
             self._numpy_step(y, u, valid)
             return
-        x, P, sp = self._x, self._P, self.points
+        x, P, sp = self._state.x, self._state.P, self.points
         assert x is not None and P is not None
         n_b, n = x.shape
         N = sp.num_points
@@ -449,9 +449,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         sp = self.points
         with np.errstate(all="ignore"):
             Z = self._h(X.reshape(n_b * N, n)).reshape(n_b, N, -1)
-        compiled_unscented.update(x, P, X, Z, y, sp.Wm, sp.Wc, self._R, valid, self._x,
-                                  self._P, self._diverged, self._nis_run, self._nis,
-                                  self._limits, self._logdet)
+        compiled_unscented.update(x, P, X, Z, y, sp.Wm, sp.Wc, self._R, valid, self._state)
 
 
 register_estimator("ukf", UnscentedKalmanFilter)

@@ -34,8 +34,11 @@ matrices ``(B | 1, r, c)`` (1: shared by all systems), ``y, ŷ (B, m)``, ``valid
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, NamedTuple
+
 import numpy as np
 
+from ..state import GATE, MAX_TRACE, NIS_PATIENCE, NIS_THRESHOLD
 from . import jit
 from .linalg import (
     CHUNK,
@@ -46,7 +49,11 @@ from .linalg import (
     spd_inverse,
     symmetrize_sum,
 )
-from .watch import verdict
+from .watch import Watched, verdict
+
+if TYPE_CHECKING:
+    from ..kalman import LinearGains, StepMatrices
+    from ..state import FilterState
 
 EPS = float(np.finfo(np.float64).eps)
 
@@ -99,24 +106,36 @@ def gain_block(Pm: np.ndarray, Hs: np.ndarray, Rs: np.ndarray, nb: int, PHt: np.
     factored_joseph(Pm, Hs, Rs, K, nb, IKH, T, U, KR)  # Joseph form from factors: PSD
 
 
+class Block(NamedTuple):
+    """The covariance half of an update on a block of columns, by name: ``ok`` (``S`` positive
+    definite), ``K``, ``W = S⁻¹``, ``Pm = P⁻`` and ``Pp = P⁺`` (column ``t``: one row of ``P``)."""
+
+    ok: np.ndarray
+    K: np.ndarray
+    W: np.ndarray
+    Pm: np.ndarray
+    Pp: np.ndarray
+
+
 @jit
-def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
-           ok: np.ndarray, K: np.ndarray, W: np.ndarray, Pm: np.ndarray, Pp: np.ndarray,
-           c0: int, shared: bool, store_P: bool, x: np.ndarray, P: np.ndarray,
-           diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray,
-           logdet: np.ndarray) -> bool:
+def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray, blk: Block,
+           c0: int, shared: bool, store_P: bool, out: Watched) -> bool:
     """The state half of the update and the watch for systems ``b0 .. b0+nb``: ``x⁺ = x⁻ + K
-    e`` and ``NIS = eᵀ W e`` (``W = S⁻¹``), then ``x⁺`` and ``P⁺ = Pp`` (``P⁻ = Pm`` without a
-    usable measurement) stored into ``x`` (and ``P`` with ``store_P``) where both are
-    finite. Column ``t`` of the blocks ``Xm (n, ·)`` (``x⁻``) and ``E (m, ·)`` (innovations)
-    belongs to system ``b0 + t``; of ``ok``, ``K``, ``W``, ``Pm``, ``Pp`` column ``c0 + t`` (``0``
-    for all where ``shared``). ``logdet[b]`` receives ``log det S`` (NaN without a usable
+    e`` and ``NIS = eᵀ W e`` (``W = S⁻¹``), then ``x⁺`` and ``P⁺ = blk.Pp`` (``P⁻ = blk.Pm``
+    without a usable measurement) stored into ``out.x`` (and ``out.P`` with ``store_P``) where
+    both are finite. Column ``t`` of the blocks ``Xm (n, ·)`` (``x⁻``) and ``E (m, ·)``
+    (innovations) belongs to system ``b0 + t``; of ``blk``'s arrays column ``c0 + t`` (``0`` for
+    all where ``shared``). ``out.logdet[b]`` receives ``log det S`` (NaN without a usable
     measurement), for the innovation's log-likelihood. A NIS above the gate's threshold
-    (``limits[4]``, module docstring) keeps ``x⁻, P⁻`` as a missing measurement does; the watch
-    books it all the same. Returns whether every estimate was stored."""
+    (``limits[GATE]``, module docstring) keeps ``x⁻, P⁻`` as a missing measurement does; the
+    watch books it all the same. Returns whether every estimate was stored."""
+    ok, K, W, Pm, Pp = blk.ok, blk.K, blk.W, blk.Pm, blk.Pp
+    x, P, diverged, nis_run, nis, logdet = (out.x, out.P, out.diverged, out.nis_run, out.nis,
+                                            out.logdet)
+    limits = out.limits
     n, m = Xm.shape[0], E.shape[0]
-    nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
-    gate_limit = limits[4] if limits.shape[0] > 4 else np.inf
+    nis_limit, patience, max_trace = limits[NIS_THRESHOLD], limits[NIS_PATIENCE], limits[MAX_TRACE]
+    gate_limit = limits[GATE]
     xn = np.empty(n)
     every = True
     for t in range(nb):
@@ -164,16 +183,26 @@ def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray,
     return every
 
 
+def predict_update(state: FilterState, xp: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                   y: np.ndarray, hx: np.ndarray, H: np.ndarray, R: np.ndarray,
+                   valid: np.ndarray, predict: np.ndarray) -> None:
+    """One step of every system of ``state`` (the filter's record), in place: ``x⁻ = xp`` (the
+    caller's ``f(x, u)``; ``x`` itself where ``predict`` is False), ``P⁻ = F P Fᵀ + Q`` where
+    ``predict``, the update with ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then
+    the watch (``state.logdet``: each system's ``log det S``)."""
+    predict_update_kernel(xp, F, Q, y, hx, H, R, valid, predict, state.x, state.P,
+                          state.diverged, state.nis_run, state.nis, state.logdet, state.limits)
+
+
 @jit
-def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
-                   Q: np.ndarray, y: np.ndarray, hx: np.ndarray, H: np.ndarray,
-                   R: np.ndarray, valid: np.ndarray, predict: np.ndarray,
-                   diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray,
-                   limits: np.ndarray, logdet: np.ndarray) -> None:
-    """One step of every system, in place: ``x⁻ = xp`` (the caller's ``f(x, u)``; ``x`` itself
-    where ``predict`` is False), ``P⁻ = F P Fᵀ + Q`` where ``predict``, the update with
-    ``e = y − hx`` (the caller's ``h(x⁻)``), ``H`` and ``R``, then the watch (``logdet``: each
-    system's ``log det S``)."""
+def predict_update_kernel(xp: np.ndarray, F: np.ndarray, Q: np.ndarray, y: np.ndarray,
+                          hx: np.ndarray, H: np.ndarray, R: np.ndarray, valid: np.ndarray,
+                          predict: np.ndarray, x: np.ndarray, P: np.ndarray,
+                          diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray,
+                          logdet: np.ndarray, limits: np.ndarray) -> None:
+    """The kernel of :func:`predict_update`: the step's inputs, then the record's arrays (in
+    the order of :class:`~.watch.Watched`)."""
+    out = Watched(x, P, diverged, nis_run, nis, logdet, limits)
     n_b, n = x.shape
     m = y.shape[1]
     if not (P.shape[0] == xp.shape[0] == y.shape[0] == hx.shape[0] == valid.shape[0]
@@ -204,33 +233,45 @@ def predict_update(x: np.ndarray, P: np.ndarray, xp: np.ndarray, F: np.ndarray,
                 Xm[i, t] = xp[b0 + t, i]
             for i in range(m):
                 E[i, t] = y[b0 + t, i] - hx[b0 + t, i]
-        finish(b0, nb, Xm, E, valid, ok, K, W, Pm, U, 0, False, True, x, P, diverged,
-               nis_run, nis, limits, logdet)
+        finish(b0, nb, Xm, E, valid, Block(ok, K, W, Pm, U), 0, False, True, out)
 
 
-@jit
-def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: np.ndarray,
-                C: np.ndarray, Q: np.ndarray, R: np.ndarray, y: np.ndarray,
-                valid: np.ndarray, predict: np.ndarray, gain_K: np.ndarray,
-                gain_W: np.ndarray, regime: np.ndarray, diverged: np.ndarray,
-                nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray, logdet: np.ndarray
-                ) -> bool:
-    """One step of a linear model's filter, in place: ``x⁻ = A x + B u`` (``u (B | 1, n_u)``)
-    and ``P⁻ = A P Aᵀ + Q`` where ``predict``, the update with ``e = y − C x⁻``, the watch.
-    Returns True; False when the gate (``limits[4]``) rejects a measurement while ``P`` is
-    shared or steady — shortcuts that cannot hold that system's own ``P⁻`` — and then nothing
-    of the state (``x``, ``P``, ``regime``, the watch's arrays) has been written: the caller
+def linear_step(state: FilterState, gains: LinearGains, prediction: StepMatrices,
+                update: StepMatrices, u: np.ndarray, y: np.ndarray, valid: np.ndarray,
+                predict: np.ndarray) -> bool:
+    """One step of a linear model's filter on its record ``state``, in place: ``x⁻ = A x + B u``
+    (``u (B | 1, n_u)``) and ``P⁻ = A P Aᵀ + Q`` where ``predict`` (``prediction``'s ``A, B,
+    Qd``), the update with ``e = y − C x⁻`` (``update``'s ``C, R``), the watch. Returns True;
+    False when the gate (``limits[GATE]``) rejects a measurement while ``P`` is shared or
+    steady — shortcuts that cannot hold that system's own ``P⁻`` — and then nothing of the
+    state (``x``, ``P``, ``gains.regime``, the watch's arrays) has been written: the caller
     leaves the shortcut and calls again (:class:`~fir_gym.estimators.kalman.LinearGains`).
 
-    ``P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system (every
-    measurement must then be usable and ``predict`` the same for all). ``gain_K (n, m,
-    rows of P)`` and ``gain_W (m, m, rows)`` receive ``K`` and ``S⁻¹`` of each row of ``P``
-    (held as blocks). ``regime[0] == 1`` is the steady state: ``P`` and the gains stay,
+    ``state.P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system
+    (every measurement must then be usable and ``predict`` the same for all). ``gains.K (n,
+    m, rows of P)`` and ``gains.W (m, m, rows)`` receive ``K`` and ``S⁻¹`` of each row of ``P``
+    (held as blocks). ``gains.regime[0] == 1`` is the steady state: ``P`` and the gains stay,
     only the states are updated (every measurement usable, every system predicting);
     with ``regime[1] == 1`` (a time-invariant model) a step enters it when ``max |P⁺ −
     P| <= 4 eps max |P|`` (the recursion then only wanders by a few ulps, often in a
     cycle, never settling bit for bit), and a repaired (non-finite) estimate leaves it.
     """
+    return linear_step_kernel(prediction.A, prediction.B, prediction.Qd, update.C, update.R,
+                              u, y, valid, predict, gains.K, gains.W, gains.regime, state.x,
+                              state.P, state.diverged, state.nis_run, state.nis, state.logdet,
+                              state.limits)
+
+
+@jit
+def linear_step_kernel(A: np.ndarray, B: np.ndarray, Q: np.ndarray, C: np.ndarray,
+                       R: np.ndarray, u: np.ndarray, y: np.ndarray, valid: np.ndarray,
+                       predict: np.ndarray, gain_K: np.ndarray, gain_W: np.ndarray,
+                       regime: np.ndarray, x: np.ndarray, P: np.ndarray, diverged: np.ndarray,
+                       nis_run: np.ndarray, nis: np.ndarray, logdet: np.ndarray,
+                       limits: np.ndarray) -> bool:
+    """The kernel of :func:`linear_step`: the matrices, the step's inputs, the gains' arrays,
+    then the record's arrays (in the order of :class:`~.watch.Watched`)."""
+    out = Watched(x, P, diverged, nis_run, nis, logdet, limits)
     n_b, n = x.shape
     n_p, m, n_u = P.shape[0], y.shape[1], u.shape[1]
     if not (n_p in (1, n_b) and gain_K.shape[2] == gain_W.shape[2] == n_p
@@ -276,11 +317,11 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                         scale = max(scale, abs(P[r, i, j]))
                         change = max(change, abs(U[i, j, t] - P[r, i, j]))
     shared = n_p < n_b
-    gate_limit = limits[4] if limits.shape[0] > 4 else np.inf
+    gate_limit = limits[GATE]
     Xm, E = np.empty((n, n_b)), np.empty((m, n_b))
     settling = regime[1] == 1
     # the state half: x⁻ and e of every system, then one finish call (a call per block of
-    # 64, 19 arguments each, cost the converged KF ~15 ns per system-step of its ~45)
+    # 64 cost the converged KF ~15 ns per system-step of its ~45)
     for b in range(n_b):
         ub = 0 if u.shape[0] == 1 else b
         settling = settling and valid[b] and predict[b]
@@ -309,9 +350,8 @@ def linear_step(x: np.ndarray, P: np.ndarray, A: np.ndarray, B: np.ndarray, u: n
                         q += E[i, b] * gain_W[i, k, col] * E[k, b]
                 if q > gate_limit:
                     return False
-    repaired = not finish(0, n_b, Xm, E, valid, ok_all, gain_K, gain_W, Pm_all, Pp_all, 0,
-                          shared, not (shared or steady), x, P, diverged, nis_run, nis, limits,
-                          logdet)
+    repaired = not finish(0, n_b, Xm, E, valid, Block(ok_all, gain_K, gain_W, Pm_all, Pp_all),
+                          0, shared, not (shared or steady), out)
     if settling and gate_limit < np.inf:             # a rejected measurement: as if missing
         for b in range(n_b):
             settling = settling and not nis[b] > gate_limit

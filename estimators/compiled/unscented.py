@@ -24,11 +24,17 @@ as ``x⁻, P⁻`` and draws the update's points from it.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from . import jit
-from .kalman import finish
+from .kalman import Block, finish
 from .linalg import CHUNK, cholesky, load, psd_rebuild, spd_inverse
+from .watch import Watched
+
+if TYPE_CHECKING:
+    from ..state import FilterState
 
 #: relative tolerance below which negative eigenvalues count as round-off (as the numpy
 #: reference's ``PSD_TOL``)
@@ -198,13 +204,25 @@ def predict(X: np.ndarray, Xf: np.ndarray, x: np.ndarray, P: np.ndarray, Wm: np.
     return x_pred, P_pred, sigma_points(x_pred, P_pred, xi, jitter)
 
 
-@jit
 def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
            y: np.ndarray, Wm: np.ndarray, Wc: np.ndarray, R: np.ndarray, valid: np.ndarray,
-           x: np.ndarray, P: np.ndarray, diverged: np.ndarray, nis_run: np.ndarray,
-           nis: np.ndarray, limits: np.ndarray, logdet: np.ndarray) -> None:
+           state: FilterState) -> None:
     """The measurement update of every system from its points ``X (B, N, n)`` and ``Z = h(X)``,
-    then the watch, written into ``x``, ``P`` (which may be ``x_pred``, ``P_pred``)."""
+    then the watch, written into the record ``state`` (whose ``x``, ``P`` may be ``x_pred``,
+    ``P_pred``)."""
+    update_kernel(x_pred, P_pred, X, Z, y, Wm, Wc, R, valid, state.x, state.P, state.diverged,
+                  state.nis_run, state.nis, state.logdet, state.limits)
+
+
+@jit
+def update_kernel(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
+                  y: np.ndarray, Wm: np.ndarray, Wc: np.ndarray, R: np.ndarray,
+                  valid: np.ndarray, x: np.ndarray, P: np.ndarray, diverged: np.ndarray,
+                  nis_run: np.ndarray, nis: np.ndarray, logdet: np.ndarray, limits: np.ndarray
+                  ) -> None:
+    """The kernel of :func:`update`: the step's inputs, then the record's arrays (in the order
+    of :class:`~.watch.Watched`)."""
+    out = Watched(x, P, diverged, nis_run, nis, logdet, limits)
     n_b, _, n = X.shape
     m = Z.shape[2]
     if not (x_pred.shape[0] == P_pred.shape[0] == Z.shape[0] == y.shape[0] == valid.shape[0]
@@ -251,5 +269,4 @@ def update(x_pred: np.ndarray, P_pred: np.ndarray, X: np.ndarray, Z: np.ndarray,
             for i in range(m):
                 E[i, t] = y[b, i] - y_hat[b, i]
         psd_rebuild(Pp, Tp, nb)                      # P⁺ through its PSD factor
-        finish(b0, nb, Xm, E, valid, ok, K, Ws, Pm, Pp, 0, False, True, x, P, diverged,
-               nis_run, nis, limits, logdet)
+        finish(b0, nb, Xm, E, valid, Block(ok, K, Ws, Pm, Pp), 0, False, True, out)

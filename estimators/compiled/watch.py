@@ -7,10 +7,10 @@ diverged (sticky) where they are not finite, where ``trace P`` exceeds
 ``max_covariance_trace``, or where its NIS has been above the χ² threshold — a NaN
 NIS of a usable measurement counts as above — for ``nis_patience`` steps running.
 
-``limits = [nis_threshold, nis_patience, max_covariance_trace]`` (float64), and for the
-windowed filters a fourth entry ``max_estimate``: a system whose new estimate has a
-component beyond it in magnitude is flagged too (the growth bound of
-:mod:`~fir_gym.estimators._consistency`).
+``limits`` is the record's (:mod:`~fir_gym.estimators.state`, read by the names
+``NIS_THRESHOLD``, ``NIS_PATIENCE``, ``MAX_TRACE``, ``MAX_ESTIMATE``, ``GATE``); with a finite
+``MAX_ESTIMATE`` (the windowed filters) a system whose new estimate has a component beyond it
+in magnitude is flagged too (the growth bound of :mod:`~fir_gym.estimators._consistency`).
 
 :func:`innovation_nis` is the twin of
 :func:`~fir_gym.estimators._consistency.innovation_nis`, the windowed filters' one-step
@@ -19,9 +19,33 @@ innovation test.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, NamedTuple
+
 import numpy as np
 
+from ..state import MAX_ESTIMATE, MAX_TRACE, NIS_PATIENCE, NIS_THRESHOLD
 from . import jit
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+__all__ = ["Watched", "accept", "accept_into", "innovation_nis", "verdict"]
+
+
+class Watched(NamedTuple):
+    """The arrays of a :class:`~fir_gym.estimators.state.FilterState` a compiled step writes,
+    by name. The kernels build it from the record's arrays at their entry and hand it to
+    their pieces (a tuple passed between compiled functions costs nothing; at the Python
+    boundary numba dispatches a tuple argument about 0.6 µs slower than its arrays, a quarter
+    of a step's fixed cost, so the entry points take the record and the kernels its arrays)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    diverged: np.ndarray
+    nis_run: np.ndarray
+    nis: np.ndarray
+    logdet: np.ndarray
+    limits: np.ndarray
 
 
 @jit
@@ -37,18 +61,27 @@ def verdict(finite: bool, trace: float, nis: float, usable: bool, has_nis: bool,
     return run, blown
 
 
-@jit
 def accept(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.ndarray,
-           has_nis: bool, x: np.ndarray, P: np.ndarray, diverged: np.ndarray,
-           nis_run: np.ndarray, nis: np.ndarray, limits: np.ndarray) -> None:
-    """Store ``x_new (B, n)``, ``P_new (B, n, n)`` into ``x``, ``P`` where finite, and book every
-    system (``nis_new`` is ignored without ``has_nis``)."""
+           has_nis: bool, state: FilterState) -> None:
+    """Store ``x_new (B, n)``, ``P_new (B, n, n)`` into the record's ``x``, ``P`` where finite,
+    and book every system in its watch (``nis_new`` is ignored without ``has_nis``)."""
+    accept_into(x_new, P_new, nis_new, valid, has_nis, state.x, state.P, state.diverged,
+                state.nis_run, state.nis, state.logdet, state.limits)
+
+
+@jit
+def accept_into(x_new: np.ndarray, P_new: np.ndarray, nis_new: np.ndarray, valid: np.ndarray,
+                has_nis: bool, x: np.ndarray, P: np.ndarray, diverged: np.ndarray,
+                nis_run: np.ndarray, nis: np.ndarray, logdet: np.ndarray, limits: np.ndarray
+                ) -> None:
+    """The kernel of :func:`accept`, on the record's arrays (``logdet`` is left as it is: the
+    windowed filters have no innovation covariance)."""
     n_b, n = x_new.shape
     if not (P_new.shape[0] == x.shape[0] == P.shape[0] == valid.shape[0] == diverged.shape[0]
             == nis_run.shape[0] == nis.shape[0] == n_b and nis_new.shape[0] in (0, n_b)):
         raise ValueError("accept: the arrays must have a row per system")
-    nis_limit, patience, max_trace = limits[0], limits[1], limits[2]
-    max_abs = limits[3] if limits.shape[0] > 3 else np.inf
+    nis_limit, patience, max_trace = limits[NIS_THRESHOLD], limits[NIS_PATIENCE], limits[MAX_TRACE]
+    max_abs = limits[MAX_ESTIMATE]
     for b in range(n_b):
         finite = True
         trace = 0.0

@@ -105,7 +105,7 @@ class VectorEstimatorObservation(gym.vector.VectorWrapper):
               options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         env: Any = self.env                    # its reset takes a list of seeds too
         y, info = env.reset(seed=seed, options=options)
-        self.estimator.reset(self.estimator._x0, self.estimator._P0)
+        self.estimator.reset(*self.estimator.prior)
         Y = self._measurements(y)
         x_hat = self.estimator.step(_masked(Y, info.get("measurement_missing")))
         self._prev_done[:] = False

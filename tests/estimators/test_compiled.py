@@ -21,7 +21,8 @@ from compiled_paths import numpy_path
 
 from fir_gym.estimators import compiled
 from fir_gym.estimators._kalman_linalg import cholesky, spd_inverse
-from fir_gym.estimators.kalman import predict_covariance, update_kernel
+from fir_gym.estimators.kalman import LinearGains, StepMatrices, predict_covariance, update_kernel
+from fir_gym.estimators.state import GATE, NIS_THRESHOLD, FilterState, new_limits
 from fir_gym.estimators.unscented import (
     CubatureSigmaPoints,
     MerweScaledSigmaPoints,
@@ -38,7 +39,7 @@ from fir_gym.estimators.compiled import unscented as cu  # noqa: E402
 from fir_gym.estimators.compiled import watch  # noqa: E402
 
 RTOL = 1e-12
-LIMITS = np.array([1e300, 10.0, 1e300])        # a watch that flags nothing finite
+LIMITS = new_limits(1e300, 10, 1e300)          # a watch that flags nothing finite
 
 
 def spd(rng, shape, n, scale=1.0):
@@ -50,8 +51,9 @@ def close(a, b, scale=1.0):
     np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * scale)
 
 
-def watch_state(B):
-    return np.zeros(B, bool), np.zeros(B, np.int64), np.full(B, np.nan)
+def record(x, P, limits=LIMITS):
+    """A filter's state record over copies of ``x``, ``P``, the watch cleared."""
+    return FilterState.of_batch(x, P, limits.copy())
 
 
 @pytest.mark.parametrize(("n", "m"), [(1, 1), (2, 1), (3, 2), (4, 2), (5, 3), (6, 4)])
@@ -68,11 +70,9 @@ def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, share
     y, hx = rng.normal(size=(B, m)), rng.normal(size=(B, m))
     valid = rng.uniform(size=B) > 0.1
     predict = rng.uniform(size=B) > 0.1            # some systems take their first step
-    xs, Ps = x.copy(), P.copy()
-    diverged, run, nis = watch_state(B)
-    logdet = np.empty(B)
-    ck.predict_update(xs, Ps, x, F, Q, y, hx, H, R, valid, predict, diverged, run, nis, LIMITS,
-                      logdet)
+    s = record(x, P)
+    ck.predict_update(s, x, F, Q, y, hx, H, R, valid, predict)
+    xs, Ps, diverged, run, nis, logdet = s.x, s.P, s.diverged, s.nis_run, s.nis, s.logdet
     P_pred = np.where(predict[:, None, None], predict_covariance(P, F[0] if shared else F, Q),
                       P)
     want = update_kernel(x, P_pred, y - hx, H[0] if shared else H, R[0] if shared else R,
@@ -92,7 +92,7 @@ def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, share
 
 @pytest.mark.parametrize(("n", "m"), [(1, 1), (3, 1), (4, 2), (5, 3)])
 def test_predict_update_gates_as_update_kernel_and_as_a_missing_measurement(n, m):
-    """The gate (``limits[4]``, a NIS threshold) in the kernel: the systems above it end
+    """The gate (``limits[GATE]``, a NIS threshold) in the kernel: the systems above it end
     bit for bit where the same kernel leaves them without their measurement (``valid``
     False), their NIS kept and booked; against ``update_kernel(..., gate=)`` (the numpy
     reference) to round-off, the rejections exactly. Thresholds are placed between the
@@ -108,20 +108,19 @@ def test_predict_update_gates_as_update_kernel_and_as_a_missing_measurement(n, m
     predict = np.ones(B, bool)
 
     def run(valid, limits):
-        xs, Ps = x.copy(), P.copy()
-        diverged, run_, nis = watch_state(B)
-        ck.predict_update(xs, Ps, x, F, Q, y, hx, H, R, valid, predict, diverged, run_, nis,
-                          limits, np.empty(B))
-        return xs, Ps, nis, run_
+        s = record(x, P, limits)
+        ck.predict_update(s, x, F, Q, y, hx, H, R, valid, predict)
+        return s.x, s.P, s.nis, s.nis_run
     _, _, nis_free, _ = run(valid, LIMITS)
     q = np.sort(nis_free[valid])
     half = len(q) // 2
     gate = 0.5 * (q[half - 1] + q[half])                      # the upper half above
-    watch_limits = np.array([gate, 10.0, 1e300])              # the watch's NIS run, too
-    xs, Ps, nis, runs = run(valid, np.array([*watch_limits, np.inf, gate]))
+    gated = new_limits(gate, 10, 1e300)                       # the watch's NIS run, too
+    gated[GATE] = gate
+    xs, Ps, nis, runs = run(valid, gated)
     rejected = valid & (nis_free > gate)
     assert rejected.sum() == len(q) - half
-    xm, Pm, _, runs_missing = run(valid & ~rejected, np.array([*watch_limits, np.inf, np.inf]))
+    xm, Pm, _, runs_missing = run(valid & ~rejected, new_limits(gate, 10, 1e300))
     np.testing.assert_array_equal(xs, xm)
     np.testing.assert_array_equal(Ps, Pm)
     np.testing.assert_array_equal(nis[valid], nis_free[valid])     # reported all the same
@@ -146,26 +145,29 @@ def test_linear_step_writes_nothing_when_the_gate_fires_under_a_shortcut(steady)
     x, P = rng.normal(size=(B, n)), np.eye(n)[None].copy()
     y = rng.normal(size=(B, m))
     y[4] += 1e3                                               # one outlier
-    K, W = rng.normal(size=(n, m, 1)), np.full((m, m, 1), 0.3)
-    regime = np.array([int(steady), 1])
+    gains = LinearGains(n, m, may_settle=True)
+    gains.K, gains.W = rng.normal(size=(n, m, 1)), np.full((m, m, 1), 0.3)
+    gains.regime[0] = int(steady)
     valid, predict = np.ones(B, bool), np.ones(B, bool)
-    diverged, run, nis = watch_state(B)
-    logdet = np.full(B, -7.0)
-    state = [a.copy() for a in (x, P, K, W, regime, diverged, run, nis, logdet)]
-    limits = np.array([1e300, 10.0, 1e300, np.inf, 30.0])
+    limits = new_limits(1e300, 10, 1e300)
+    limits[GATE] = 30.0
+    s = record(x, P, limits)
+    s.logdet[:] = -7.0
+    fields = ("x", "P", "diverged", "nis_run", "nis", "logdet")
+    before = [getattr(s, f).copy() for f in fields] + [a.copy() for a in
+                                                       (gains.K, gains.W, gains.regime)]
+    mats = StepMatrices(A, np.zeros((n, 0)), C, Q, R)
     u = np.zeros((1, 0))
-    done = ck.linear_step(x, P, A, np.zeros((n, 0)), u, C, Q, R, y, valid, predict, K, W,
-                          regime, diverged, run, nis, limits, logdet)
+    done = ck.linear_step(s, gains, mats, mats, u, y, valid, predict)
     assert done is False
-    for before, after in zip(state, (x, P, K, W, regime, diverged, run, nis, logdet),
-                             strict=True):
-        scratch = after is K or after is W                   # the gains: written afresh by
+    after = [getattr(s, f) for f in fields] + [gains.K, gains.W, gains.regime]
+    for name, b, a in zip((*fields, "K", "W", "regime"), before, after, strict=True):
+        scratch = name in ("K", "W")                          # the gains: written afresh by
         if steady or not scratch:                             # every step out of the steady
-            np.testing.assert_array_equal(before, after)      # state
-    limits[4] = np.inf
-    assert ck.linear_step(x, P, A, np.zeros((n, 0)), u, C, Q, R, y, valid, predict, K, W,
-                          regime, diverged, run, nis, limits, logdet) is True
-    assert np.isfinite(nis).all()
+            np.testing.assert_array_equal(b, a, err_msg=name)  # state
+    s.limits[GATE] = np.inf
+    assert ck.linear_step(s, gains, mats, mats, u, y, valid, predict) is True
+    assert np.isfinite(s.nis).all()
 
 
 @pytest.mark.parametrize("m", [1, 2, 3])
@@ -180,10 +182,9 @@ def test_predict_update_keeps_the_estimate_and_flags_where_S_is_not_positive_def
     R[2] = -1e3 * np.eye(m)                        # S indefinite for system 2 only
     y = rng.normal(size=(B, m))
     valid = predict = np.ones(B, dtype=bool)
-    xs, Ps = x.copy(), P.copy()
-    diverged, run, nis = watch_state(B)
-    ck.predict_update(xs, Ps, x, F, np.zeros((n, n)), y, np.zeros((B, m)), H, R, valid,
-                      predict, diverged, run, nis, LIMITS, np.empty(B))
+    s = record(x, P)
+    ck.predict_update(s, x, F, np.zeros((n, n)), y, np.zeros((B, m)), H, R, valid, predict)
+    xs, Ps, diverged, nis = s.x, s.P, s.diverged, s.nis
     with np.errstate(invalid="ignore", divide="ignore"):
         ref = update_kernel(x, predict_covariance(P, F[0], np.zeros((n, n))), y, H[0], R,
                             valid)
@@ -214,7 +215,7 @@ def test_the_watch_equals_the_numpy_accept():
     flagged = []
     for k in range(8):
         x_new, P_new = rng.normal(size=(B, 2)), spd(rng, (B,), 2)
-        nis_new = rng.uniform(0.0, 2.0 * a._nis_threshold, size=B)
+        nis_new = rng.uniform(0.0, 2.0 * a.state.limits[NIS_THRESHOLD], size=B)
         valid = rng.uniform(size=B) > 0.2
         x_new[k % B] = np.nan
         P_new[(k + 3) % B, 0, 1] = np.inf
@@ -223,11 +224,11 @@ def test_the_watch_equals_the_numpy_accept():
         nis_new[~valid] = np.nan
         with np.errstate(invalid="ignore"):
             a._accept(x_new.copy(), P_new.copy(), nis_new.copy(), valid)
-        watch.accept(x_new, P_new, nis_new, valid, True, b._x, b._P, b._diverged, b._nis_run,
-                     b._nis, b._limits)
-        for name in ("_x", "_P", "_diverged", "_nis_run", "_nis"):
-            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-        flagged.append(int(a._diverged.sum()))
+        watch.accept(x_new, P_new, nis_new, valid, True, b.state)
+        for name in ("x", "P", "diverged", "nis_run", "nis"):
+            np.testing.assert_array_equal(getattr(a.state, name), getattr(b.state, name),
+                                          err_msg=name)
+        flagged.append(int(a.state.diverged.sum()))
     assert 0 < flagged[0] < flagged[-1]              # the flags spread as the runs go on
 
 

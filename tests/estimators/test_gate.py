@@ -196,7 +196,7 @@ def test_the_kalman_filter_gates_in_its_steady_state_and_with_a_shared_covarianc
             y = Y[k].copy()
             if k in hit_at:
                 assert gated.steady_state and twin.steady_state
-                assert (gated._P.shape[0] == 1) == (shared and k == hit_at[0])
+                assert (gated.state.P.shape[0] == 1) == (shared and k == hit_at[0])
                 y[hit, 0] += 100.0 * np.sqrt(model.R[0, 0])
             u = None if k == 0 else U[k - 1]
             x_gated = gated.step(y, u)
@@ -206,7 +206,7 @@ def test_the_kalman_filter_gates_in_its_steady_state_and_with_a_shared_covarianc
             assert gated.steady_state == twin.steady_state
             np.testing.assert_array_equal(gated.last_info["gated"], hit & (k in hit_at))
             if k in hit_at:
-                assert not gated.steady_state and gated._P.shape[0] == B
+                assert not gated.steady_state and gated.state.P.shape[0] == B
     np.testing.assert_array_equal(gated.last_info["gated_count"], 2 * hit)
 
 
@@ -406,7 +406,7 @@ def test_the_kalman_twin_gates_as_the_numpy_reference_in_the_steady_state(shared
         if np.any(twin.last_info["gated"]):
             fired_steady += steady
             for f in (twin, ref):
-                assert not f.steady_state and f._P.shape[0] == B
+                assert not f.steady_state and f.state.P.shape[0] == B
     assert (fired_steady >= 3).all()
 
 
