@@ -87,7 +87,15 @@ def test_the_factored_joseph_update_is_psd(case) -> None:
     R = spread_covariance(rng, m, r_exp - 2, r_exp)
     H = rng.normal(size=(m, n))
     _, _, Pn = gain_kernel(P, H, R)
-    assert_psd(Pn[0], "gain_kernel")
+    if not np.isfinite(Pn).all():
+        # the one case where the update gives NaN (and the filter flags the system): S =
+        # H P Hᵀ + R singular to working precision — more sensors than states, with a prior
+        # far above R (e.g. n = 1, m = 2, P = 1e8, R = 1e-9: R is lost in forming S)
+        S = H @ P[0] @ H.T + R
+        lam = np.linalg.eigvalsh(0.5 * (S + S.T))
+        assert m > n and lam[0] <= 4 * m * EPS * lam[-1], ("NaN with a regular S", lam)
+    else:
+        assert_psd(Pn[0], "gain_kernel")
     assert_psd(factored_joseph(P, H, R, 1e3 * rng.normal(size=(1, n, m)))[0], "any gain")
 
 
