@@ -50,7 +50,6 @@ from ._fir_bank import WindowBank
 from ._observability import index_along, require_window
 from ._validation import FloatArray, as_covariance, one_of, positive
 from ._windowed import InnovationTerms, WindowedEstimator
-from .extended import model_callables, model_linearizer
 from .fir_gains import WINDOW_FORMS
 from .model import StateSpaceModel
 from .registry import register_estimator
@@ -115,8 +114,8 @@ class ExtendedFIRFilter(WindowedEstimator):
         Qx = np.asarray(model.GQGT)
         self._Qx = Qx if np.any(Qx) else None
         super().__init__(model, x0=x0, P0=P0, **options)
-        self._f, self._F, self._h, self._H = model_callables(model)
-        self._linearize = model_linearizer(model)
+        self._f, self._F, self._h, self._H = model.unchecked_callables()
+        self._linearize = model.unchecked_linearizer()
         self._require_observable_nominal()
 
     def _require_observable_nominal(self) -> None:

@@ -31,18 +31,7 @@ from .registry import register_estimator
 from .sequences import SmootherResult
 from .smoothers import smooth_sequence
 
-__all__ = ["ExtendedKalmanFilter", "model_callables", "model_linearizer"]
-
-
-def model_callables(model: StateSpaceModel) -> tuple[Any, Any, Any, Any]:
-    """The model's ``f, F, h, H`` for the hot path (:meth:`StateSpaceModel.unchecked_callables`)."""
-    return model.unchecked_callables()
-
-
-def model_linearizer(model: StateSpaceModel) -> Any:
-    """``(x, u) -> (f(x, u), F(x, u))`` for the hot path
-    (:meth:`StateSpaceModel.unchecked_linearizer`)."""
-    return model.unchecked_linearizer()
+__all__ = ["ExtendedKalmanFilter"]
 
 
 class ExtendedKalmanFilter(PublicSteps, Estimator):
@@ -81,8 +70,8 @@ class ExtendedKalmanFilter(PublicSteps, Estimator):
         model = self.model
         if getattr(model, "time_invariant", True) is False:
             raise TypeError(f"model must have time-free f/h for {type(self).__name__}")
-        self._f, self._F, self._h, self._H = model_callables(model)
-        self._linearize = model_linearizer(model)
+        self._f, self._F, self._h, self._H = model.unchecked_callables()
+        self._linearize = model.unchecked_linearizer()
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R_batch = np.ascontiguousarray(model.R)[None]       # the compiled step's layout
         self._plain_linear = isinstance(model, LinearModel) and model.is_plain

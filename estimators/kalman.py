@@ -412,9 +412,12 @@ class KalmanFilter(PublicSteps, Estimator):
 
     def _compiled_predict_update(self, y: FloatArray, u: FloatArray, valid: np.ndarray
                                  ) -> None:
-        k = self._state.k
-        self._gains.step(self._state, self._predicting(), self._matrices(k - 1),
-                         self._matrices(k), u, y, valid)
+        s = self._state
+        if self._constant:                             # (two calls of _matrices: 0.1 µs)
+            prediction = update = self._mats
+        else:
+            prediction, update = self._matrices(s.k - 1), self._matrices(s.k)
+        self._gains.step(s, self._predicting(), prediction, update, u, y, valid)
 
 
 class LinearGains:
@@ -437,26 +440,28 @@ class LinearGains:
              update: StepMatrices, u: FloatArray, y: FloatArray, valid: np.ndarray) -> None:
         """One step of the filter whose record is ``state``: predict the systems ``predict``
         with ``prediction``'s matrices, update with ``update``'s."""
-        n_b = state.x.shape[0]
         if not state.every_usable:                     # a missing measurement: no shortcuts
             self.regime[0] = 0
-            if state.P.shape[0] < n_b:
-                state.P = np.repeat(state.P, n_b, axis=0)
+            if state.P.shape[0] < state.batch:
+                state.P = np.repeat(state.P, state.batch, axis=0)
         while True:
             rows = state.P.shape[0]
             if self.K.shape[2] != rows:
                 self.regime[0] = 0
                 self.K = np.zeros((*self.K.shape[:2], rows))
                 self.W = np.zeros((*self.W.shape[:2], rows))
-            if compiled_kalman.linear_step(state, self, prediction, update, u, y, valid,
-                                           predict):
+            s = state                                  # the record's arrays, by name
+            if compiled_kalman.linear_step(prediction.A, prediction.B, prediction.Qd, update.C,
+                                           update.R, u, y, valid, predict, self.K, self.W,
+                                           self.regime, s.x, s.P, s.diverged, s.nis_run, s.nis,
+                                           s.logdet, s.limits):
                 return
             # the gate fired under a shortcut and nothing was written: the step again without
             # it, in the numpy reference's order (out of the steady state, then a P per system)
             if self.regime[0]:
                 self.regime[0] = 0
             else:
-                state.P = np.repeat(state.P, n_b, axis=0)
+                state.P = np.repeat(state.P, state.batch, axis=0)
 
 
 class _Scheduled(Protocol):

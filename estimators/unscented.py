@@ -48,7 +48,6 @@ from ._kalman_linalg import cholesky, logdet_of_inverse, psd_rebuild, rmul, spd_
 from ._validation import FloatArray
 from .base import Estimator
 from .compiled import unscented as compiled_unscented
-from .extended import model_callables
 from .kalman import keep_usable
 from .model import StateSpaceModel
 from .public_steps import PublicSteps
@@ -322,7 +321,7 @@ class UnscentedKalmanFilter(PublicSteps, Estimator):
         model = self.model
         if getattr(model, "time_invariant", True) is False:
             raise TypeError(f"model must have time-free f/h for {type(self).__name__}")
-        self._f, _, self._h, _ = model_callables(model)
+        self._f, _, self._h, _ = model.unchecked_callables()
         check_model_batched(self)
         self._GQGt = np.ascontiguousarray(model.GQGT)
         self._R = np.ascontiguousarray(model.R)

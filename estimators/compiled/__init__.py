@@ -47,7 +47,7 @@ try:  # pragma: no cover - exercised by whichever of the two installs runs the t
 except ImportError:  # pragma: no cover
     numba = None
 
-__all__ = ["ENABLED", "jit"]
+__all__ = ["ENABLED", "inlined", "jit"]
 
 #: whether the compiled twins run (``FIR_GYM_NUMBA=0`` turns them off, and so does
 #: ``NUMBA_DISABLE_JIT=1``: the loops would then run as plain Python, far slower than
@@ -72,3 +72,18 @@ def jit(fn: Function) -> Function:
         return cast("Function", numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
     except RuntimeError:                    # "cannot cache function ...: no locator available"
         return cast("Function", numba.njit(cache=False, nogil=True, error_model="numpy")(fn))
+
+
+def inlined(fn: Function) -> Function:
+    """:func:`jit` for a piece that is always inlined into the kernels that call it (numba's
+    ``inline="always"``): a piece taking named tuples of arrays (:class:`.watch.Watched`,
+    :class:`.kalman.Block`) then costs what it would with the arrays one by one — called
+    through numba's calling convention, each array of a tuple is reference-counted in and out,
+    0.26 µs a KF step (measured)."""
+    if numba is None:
+        return fn
+    options = {"nogil": True, "error_model": "numpy", "inline": "always"}
+    try:
+        return cast("Function", numba.njit(cache=True, **options)(fn))
+    except RuntimeError:                    # no writable cache location
+        return cast("Function", numba.njit(cache=False, **options)(fn))

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..state import GATE, MAX_TRACE, NIS_PATIENCE, NIS_THRESHOLD
-from . import jit
+from . import inlined, jit
 from .linalg import (
     CHUNK,
     factored_joseph,
@@ -52,7 +52,6 @@ from .linalg import (
 from .watch import Watched, verdict
 
 if TYPE_CHECKING:
-    from ..kalman import LinearGains, StepMatrices
     from ..state import FilterState
 
 EPS = float(np.finfo(np.float64).eps)
@@ -117,7 +116,7 @@ class Block(NamedTuple):
     Pp: np.ndarray
 
 
-@jit
+@inlined
 def finish(b0: int, nb: int, Xm: np.ndarray, E: np.ndarray, valid: np.ndarray, blk: Block,
            c0: int, shared: bool, store_P: bool, out: Watched) -> bool:
     """The state half of the update and the watch for systems ``b0 .. b0+nb``: ``x⁺ = x⁻ + K
@@ -236,41 +235,31 @@ def predict_update_kernel(xp: np.ndarray, F: np.ndarray, Q: np.ndarray, y: np.nd
         finish(b0, nb, Xm, E, valid, Block(ok, K, W, Pm, U), 0, False, True, out)
 
 
-def linear_step(state: FilterState, gains: LinearGains, prediction: StepMatrices,
-                update: StepMatrices, u: np.ndarray, y: np.ndarray, valid: np.ndarray,
-                predict: np.ndarray) -> bool:
-    """One step of a linear model's filter on its record ``state``, in place: ``x⁻ = A x + B u``
-    (``u (B | 1, n_u)``) and ``P⁻ = A P Aᵀ + Q`` where ``predict`` (``prediction``'s ``A, B,
-    Qd``), the update with ``e = y − C x⁻`` (``update``'s ``C, R``), the watch. Returns True;
-    False when the gate (``limits[GATE]``) rejects a measurement while ``P`` is shared or
-    steady — shortcuts that cannot hold that system's own ``P⁻`` — and then nothing of the
-    state (``x``, ``P``, ``gains.regime``, the watch's arrays) has been written: the caller
-    leaves the shortcut and calls again (:class:`~fir_gym.estimators.kalman.LinearGains`).
-
-    ``state.P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system
-    (every measurement must then be usable and ``predict`` the same for all). ``gains.K (n,
-    m, rows of P)`` and ``gains.W (m, m, rows)`` receive ``K`` and ``S⁻¹`` of each row of ``P``
-    (held as blocks). ``gains.regime[0] == 1`` is the steady state: ``P`` and the gains stay,
-    only the states are updated (every measurement usable, every system predicting);
-    with ``regime[1] == 1`` (a time-invariant model) a step enters it when ``max |P⁺ −
-    P| <= 4 eps max |P|`` (the recursion then only wanders by a few ulps, often in a
-    cycle, never settling bit for bit), and a repaired (non-finite) estimate leaves it.
-    """
-    return linear_step_kernel(prediction.A, prediction.B, prediction.Qd, update.C, update.R,
-                              u, y, valid, predict, gains.K, gains.W, gains.regime, state.x,
-                              state.P, state.diverged, state.nis_run, state.nis, state.logdet,
-                              state.limits)
-
-
 @jit
-def linear_step_kernel(A: np.ndarray, B: np.ndarray, Q: np.ndarray, C: np.ndarray,
-                       R: np.ndarray, u: np.ndarray, y: np.ndarray, valid: np.ndarray,
-                       predict: np.ndarray, gain_K: np.ndarray, gain_W: np.ndarray,
-                       regime: np.ndarray, x: np.ndarray, P: np.ndarray, diverged: np.ndarray,
-                       nis_run: np.ndarray, nis: np.ndarray, logdet: np.ndarray,
-                       limits: np.ndarray) -> bool:
-    """The kernel of :func:`linear_step`: the matrices, the step's inputs, the gains' arrays,
-    then the record's arrays (in the order of :class:`~.watch.Watched`)."""
+def linear_step(A: np.ndarray, B: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray,
+                u: np.ndarray, y: np.ndarray, valid: np.ndarray, predict: np.ndarray,
+                gain_K: np.ndarray, gain_W: np.ndarray, regime: np.ndarray, x: np.ndarray,
+                P: np.ndarray, diverged: np.ndarray, nis_run: np.ndarray, nis: np.ndarray,
+                logdet: np.ndarray, limits: np.ndarray) -> bool:
+    """One step of a linear model's filter, in place on its record's arrays (the last seven,
+    in the order of :class:`~.watch.Watched`; :meth:`~fir_gym.estimators.kalman.LinearGains.step`
+    hands them by name from the :class:`~fir_gym.estimators.state.FilterState`, with no Python
+    frame between: the KF's step is the lightest of all, 4 µs): ``x⁻ = A x + B u`` (``u (B |
+    1, n_u)``) and ``P⁻ = A P Aᵀ + Q`` where ``predict``, the update with ``e = y − C x⁻``, the
+    watch. Returns True; False when the gate (``limits[GATE]``) rejects a measurement while
+    ``P`` is shared or steady — shortcuts that cannot hold that system's own ``P⁻`` — and then
+    nothing of the state (``x``, ``P``, ``regime``, the watch's arrays) has been written: the
+    caller leaves the shortcut and calls again.
+
+    ``P`` is ``(B, n, n)``, or ``(1, n, n)``: one covariance shared by every system (every
+    measurement must then be usable and ``predict`` the same for all). ``gain_K (n, m, rows of
+    P)`` and ``gain_W (m, m, rows)`` receive ``K`` and ``S⁻¹`` of each row of ``P`` (held as
+    blocks). ``regime[0] == 1`` is the steady state: ``P`` and the gains stay, only the states
+    are updated (every measurement usable, every system predicting); with ``regime[1] == 1``
+    (a time-invariant model) a step enters it when ``max |P⁺ − P| <= 4 eps max |P|`` (the
+    recursion then only wanders by a few ulps, often in a cycle, never settling bit for bit),
+    and a repaired (non-finite) estimate leaves it.
+    """
     out = Watched(x, P, diverged, nis_run, nis, logdet, limits)
     n_b, n = x.shape
     n_p, m, n_u = P.shape[0], y.shape[1], u.shape[1]
