@@ -308,6 +308,12 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
                              f"{sorted(self.params)}")
         return self._build_model({**self.nominal_params, **overrides})
 
+    @classmethod
+    def check_vector_options(cls, options: dict[str, Any]) -> None:
+        """Refuse, before anything is built, an option the plant's native vector env cannot
+        honour (``options``: the keywords of ``gym.make_vec(id, n, vectorization_mode=
+        "vector_entry_point", ...)``). The default refuses nothing."""
+
     def design_point(self) -> DesignPoint:
         """The plant's operating point, reward weights and PID tuning (a fresh record).
 
@@ -404,6 +410,17 @@ class PlantEnv(EstimateDrawing, gym.Env[FloatArray, NDArray[np.float32]]):
         if self.burst:
             info["burst"] = delta
         return info
+
+    def render_state(self, state: FloatArray, time_step: int) -> NDArray[np.uint8] | None:
+        """:meth:`render` of the plant at ``state`` and ``time_step`` (without the last step's
+        extras), the plant's own state, step and extras left as they were — how a native
+        vector env draws each sub-env with one plant."""
+        kept = self.state, self.time_step, self._last_extra
+        try:
+            self.state, self.time_step, self._last_extra = state, time_step, {}
+            return self.render()
+        finally:
+            self.state, self.time_step, self._last_extra = kept
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

@@ -352,19 +352,13 @@ class PlantVectorEnv(VectorEnv):
                             "render_mode='rgb_array' to gym.make_vec")
             return None
         plant = self.plant
-        kept = plant.state, plant.time_step, plant._last_extra
         frames: list[NDArray[np.uint8]] = []
         views = []
-        try:
-            for i in range(self.num_envs):
-                plant.state, plant.time_step, plant._last_extra = self.states[i], \
-                    int(self.steps[i]), {}
-                frame = plant.render()
-                assert frame is not None                # the plant has render_mode rgb_array
-                frames.append(frame)
-                views.append(plant.frame_view)
-        finally:
-            plant.state, plant.time_step, plant._last_extra = kept
+        for i in range(self.num_envs):
+            frame = plant.render_state(self.states[i], int(self.steps[i]))
+            assert frame is not None                    # the plant has render_mode rgb_array
+            frames.append(frame)
+            views.append(plant.frame_view)
         self._frame_views = tuple(views)
         return tuple(frames)
 

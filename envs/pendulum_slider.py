@@ -451,10 +451,7 @@ class PendulumSliderEnv(PlantEnv):
             self._write_state(x)
         d = self.mj_data
         self._ctrl_view[0] = force
-        if self._stage_rk4 is None:
-            mujoco.mj_step(self.mj_model, d, self.params["frame_skip"])
-        else:
-            self._stage_rk4.step(self.params["frame_skip"])
+        self.advance_physics()
         failure = reset_warning(self._warning_counts)
         if failure is not None:
             # MuJoCo found a NaN or a value beyond 1e10 and reset its data: the step failed
@@ -476,6 +473,20 @@ class PendulumSliderEnv(PlantEnv):
         if np.isfinite(x_next).all():      # a failed step is the base class's to report
             self._write_state(x_next)
         return x_next, {"force": force}
+
+    @classmethod
+    def check_vector_options(cls, options: dict[str, Any]) -> None:
+        """``friction="coulomb"`` (MuJoCo's rail contact) is refused by the native vector env."""
+        refuse_batch(options.get("friction"))
+
+    def advance_physics(self) -> None:
+        """MuJoCo's steps of one env step (``frame_skip`` of them, with the friction law's
+        stage-wise force where there is one), from ``mj_data`` as it is: the physics alone,
+        no measurement, reward or checks."""
+        if self._stage_rk4 is None:
+            mujoco.mj_step(self.mj_model, self.mj_data, self.params["frame_skip"])
+        else:
+            self._stage_rk4.step(self.params["frame_skip"])
 
     def _batched_transition(self, x: FloatArray, a: FloatArray, rng: np.random.Generator
                             ) -> tuple[FloatArray, dict[str, Any]]:

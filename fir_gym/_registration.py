@@ -1,108 +1,92 @@
 """Registration of the fir-gym environment ids with Gymnasium (docs/architecture.md#registration).
 
-One literal :func:`gymnasium.register` call per id, as Gymnasium registers its own
-environments. Every entry point is a module attribute of this file, written out per
-plant: ``<plant>`` builds the plant and, when asked, wraps it —
-``gym.make(id, estimator="ekf", estimator_kwargs={...}, observation="estimate")``
-(see :func:`fir_gym.wrappers.factory.make_plant`) — and ``<plant>_vector`` builds its
-native vector env, ``gym.make_vec(id, n, vectorization_mode="vector_entry_point")``.
+One row of :data:`PAPER_PLANTS` per plant — its id, its class, its episode length and
+whether it has a native vector env — is all a paper plant needs here: adding a plant is its
+own file (with its docs page) and one row. :func:`register_envs` registers each row with
+:func:`gymnasium.register` under string entry points, as Gymnasium registers its own
+environments (so ``EnvSpec.to_json`` works): ``"fir_gym._registration:<entry>"`` builds the
+plant and, when asked, wraps it — ``gym.make(id, estimator="ekf", estimator_kwargs={...},
+observation="estimate")`` (see :func:`fir_gym.wrappers.factory.make_plant`) — and
+``"fir_gym._registration:<entry>_vector"`` builds its native vector env,
+``gym.make_vec(id, n, vectorization_mode="vector_entry_point")``. The entry points are this
+module's attributes, made from the rows below (a plant class may refuse an option its vector
+env cannot honour: ``PlantEnv.check_vector_options``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 
 from .wrappers.factory import plant_factory, plant_vector_factory
 
-# Entry points: "fir_gym._registration:<name>" in the register() calls below.
-orbit = plant_factory("fir_gym.envs.orbit:OrbitEnv")
-orbit_vector = plant_vector_factory("fir_gym.envs.orbit:OrbitEnv")
-uncertain_oscillator = plant_factory("fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv")
-uncertain_oscillator_vector = plant_vector_factory(
-    "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv")
-carrier_motion = plant_factory("fir_gym.envs.carrier_motion:CarrierMotionEnv")
-carrier_motion_vector = plant_vector_factory("fir_gym.envs.carrier_motion:CarrierMotionEnv")
-van_der_pol = plant_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
-van_der_pol_vector = plant_vector_factory("fir_gym.envs.van_der_pol:VanDerPolEnv")
-pendulum_slider = plant_factory("fir_gym.envs.pendulum_slider:PendulumSliderEnv")
-_pendulum_slider_vector = plant_vector_factory("fir_gym.envs.pendulum_slider:PendulumSliderEnv")
+
+class PaperPlant(NamedTuple):
+    """One registered plant of the papers."""
+
+    #: the Gymnasium id
+    id: str
+    #: the plant class, ``"module:Class"``
+    plant: str
+    #: this module's attribute of its entry point (``<entry>_vector``: its vector env's)
+    entry: str
+    #: the ``TimeLimit`` of an episode
+    max_episode_steps: int
+    #: what it is, in one line
+    about: str
+    #: whether it has a native (batched numpy) vector env
+    vector: bool = True
 
 
-def pendulum_slider_vector(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
-    """Build PendulumSlider-v0's native vector env (the analytic equations of motion, batched);
-    ``friction="coulomb"`` (MuJoCo's rail contact) is refused here, before anything is built."""
-    from fir_gym.envs.pendulum_slider import refuse_batch
+#: The paper plants, one row each.
+PAPER_PLANTS: tuple[PaperPlant, ...] = (
+    PaperPlant("fir_gym/Orbit-v0", "fir_gym.envs.orbit:OrbitEnv", "orbit", 1000,
+               "paper 000, simulation 1: rectilinear orbit determination"),
+    PaperPlant("fir_gym/UncertainOscillator-v0",
+               "fir_gym.envs.uncertain_oscillator:UncertainOscillatorEnv",
+               "uncertain_oscillator", 500,
+               "paper 000, simulation 2: the oscillator with a temporary model uncertainty"),
+    PaperPlant("fir_gym/CarrierMotion-v0", "fir_gym.envs.carrier_motion:CarrierMotionEnv",
+               "carrier_motion", 1000, "paper 001: aircraft-carrier motion at sea, sampled "
+               "exactly"),
+    PaperPlant("fir_gym/VanDerPol-v0", "fir_gym.envs.van_der_pol:VanDerPolEnv", "van_der_pol",
+               100, "paper 002: the stochastic Van der Pol oscillator with a continuous "
+               "measurement"),
+    PaperPlant("fir_gym/PendulumSlider-v0", "fir_gym.envs.pendulum_slider:PendulumSliderEnv",
+               "pendulum_slider", 5000, "paper 003: the pendulum on a spring-loaded slider "
+               "(MuJoCo; its vector env integrates the same equations of motion, batched)"),
+)
 
-    refuse_batch(kwargs.get("friction"))
-    return _pendulum_slider_vector(num_envs, **kwargs)
-
+# The entry points "fir_gym._registration:<entry>" and "...:<entry>_vector" of the rows.
+for _row in PAPER_PLANTS:
+    globals()[_row.entry] = plant_factory(_row.plant)
+    if _row.vector:
+        globals()[f"{_row.entry}_vector"] = plant_vector_factory(_row.plant)
+del _row
 
 #: Every environment id that ``import fir_gym`` registers.
-ENV_IDS: tuple[str, ...] = (
-    "fir_gym/Orbit-v0",
-    "fir_gym/UncertainOscillator-v0",
-    "fir_gym/CarrierMotion-v0",
-    "fir_gym/VanDerPol-v0",
-    "fir_gym/PendulumSlider-v0",
-)
+ENV_IDS: tuple[str, ...] = tuple(row.id for row in PAPER_PLANTS)
 #: The ids with a native (batched numpy) vector env.
-VECTOR_ENV_IDS: tuple[str, ...] = (
-    "fir_gym/Orbit-v0",
-    "fir_gym/UncertainOscillator-v0",
-    "fir_gym/CarrierMotion-v0",
-    "fir_gym/VanDerPol-v0",
-    "fir_gym/PendulumSlider-v0",
-)
+VECTOR_ENV_IDS: tuple[str, ...] = tuple(row.id for row in PAPER_PLANTS if row.vector)
 
 
 def register_envs() -> None:
-    """Register every id in :data:`ENV_IDS`; ids already registered are left alone.
+    """Register every row of :data:`PAPER_PLANTS`; ids already registered are left alone.
 
     ``import fir_gym`` calls it; calling it again (or importing the package in a
     process that registered the ids otherwise) changes nothing and warns of nothing.
     """
-    def register(**spec: Any) -> None:
-        if spec["id"] not in gym.registry:
-            gym.register(**spec)
-
-    # Paper 000, simulation 1: rectilinear orbit determination.
-    register(
-        id="fir_gym/Orbit-v0",
-        entry_point="fir_gym._registration:orbit",
-        vector_entry_point="fir_gym._registration:orbit_vector",
-        max_episode_steps=1000,
-    )
-    # Paper 000, simulation 2: the oscillator with a temporary model uncertainty.
-    register(
-        id="fir_gym/UncertainOscillator-v0",
-        entry_point="fir_gym._registration:uncertain_oscillator",
-        vector_entry_point="fir_gym._registration:uncertain_oscillator_vector",
-        max_episode_steps=500,
-    )
-    # Paper 001: aircraft-carrier motion at sea, sampled exactly.
-    register(
-        id="fir_gym/CarrierMotion-v0",
-        entry_point="fir_gym._registration:carrier_motion",
-        vector_entry_point="fir_gym._registration:carrier_motion_vector",
-        max_episode_steps=1000,
-    )
-    # Paper 002: the stochastic Van der Pol oscillator with a continuous measurement.
-    register(
-        id="fir_gym/VanDerPol-v0",
-        entry_point="fir_gym._registration:van_der_pol",
-        vector_entry_point="fir_gym._registration:van_der_pol_vector",
-        max_episode_steps=100,
-    )
-    # Paper 003: the pendulum on a spring-loaded slider (MuJoCo; the vector env integrates
-    # the same equations of motion analytically, batched).
-    register(
-        id="fir_gym/PendulumSlider-v0",
-        entry_point="fir_gym._registration:pendulum_slider",
-        vector_entry_point="fir_gym._registration:pendulum_slider_vector",
-        max_episode_steps=5000,
-    )
+    for row in PAPER_PLANTS:
+        if row.id in gym.registry:
+            continue
+        gym.register(
+            id=row.id,
+            entry_point=f"fir_gym._registration:{row.entry}",
+            vector_entry_point=f"fir_gym._registration:{row.entry}_vector" if row.vector
+            else None,
+            max_episode_steps=row.max_episode_steps,
+        )
 
 
 def register_plant(id: str, plant: str | type = "fir_gym.envs.model_plant:ModelPlant", *,

@@ -54,18 +54,23 @@ def test_ids_are_the_registered_ones():
 
 
 @pytest.mark.parametrize("env_id", fir_gym.ENV_IDS)
-def test_entry_points_are_literal_attributes_of_the_module(env_id):
-    """Each entry point names an attribute bound by a statement of the module (no globals())."""
+def test_entry_points_are_attributes_made_from_the_plant_s_one_row(env_id):
+    """Each id is one row of PAPER_PLANTS (a statement of the module a reader can grep), and
+    its entry points are the module attributes that row names, building the row's class."""
+    assert "PAPER_PLANTS" in module_level_names()
+    rows = [row for row in _registration.PAPER_PLANTS if row.id == env_id]
+    assert len(rows) == 1
+    row = rows[0]
     spec = gym.spec(env_id)
-    written = module_level_names()
+    assert spec.entry_point == f"{MODULE}:{row.entry}"
+    assert spec.vector_entry_point == (f"{MODULE}:{row.entry}_vector" if row.vector else None)
     for point in (spec.entry_point, spec.vector_entry_point):
         if point is None:
             continue
-        module, _, name = point.partition(":")
-        assert module == MODULE
-        assert name in written, f"{name} is not written out in {MODULE}"
-        assert callable(getattr(_registration, name))
-    assert spec.max_episode_steps is not None and spec.max_episode_steps > 0
+        entry = getattr(_registration, point.partition(":")[2])
+        assert callable(entry) and entry.plant == row.plant
+    assert spec.max_episode_steps == row.max_episode_steps > 0
+    assert spec.to_json()                              # string entry points: a JSON spec
 
 
 def test_registering_again_changes_nothing_and_warns_of_nothing():

@@ -32,15 +32,9 @@ def numpy_path(step: Any, k: int) -> Any:
 
 def mujoco_stepper(friction: str) -> Any:
     """MuJoCo's steps of one PendulumSlider-v0 env step alone (with its force law), no env."""
-    import mujoco
-
     env: Any = gym.make("fir_gym/PendulumSlider-v0", friction=friction).unwrapped
     env.reset(seed=0)
-    m, d, nstep = env.mj_model, env.mj_data, env.params["frame_skip"]
-    rk4 = env._stage_rk4
-    if rk4 is None:
-        return lambda: mujoco.mj_step(m, d, nstep)
-    return lambda: rk4.step(nstep)
+    return env.advance_physics
 
 
 def trivial_ekf_step(n_batch: int) -> Any:
@@ -68,13 +62,13 @@ def trivial_ekf_kernel(n_batch: int) -> Any:
     from fir_gym.estimators.compiled import kalman
 
     step = trivial_ekf_step(n_batch)
-    ekf = step.estimator
-    x, one = ekf._x, np.ones((n_batch, 1, 1))
+    state = step.estimator.state
+    x, one = state.x, np.ones((n_batch, 1, 1))
     y = np.zeros((n_batch, 1))
-    args = (x, ekf._P, x.copy(), one, ekf._GQGt, y, x.copy(), one, ekf._R_batch,
-            ekf._all_valid, ekf._all_predict, ekf._diverged, ekf._nis_run, ekf._nis,
-            ekf._limits, ekf._logdet)
-    return lambda: kalman.predict_update(*args)
+    qd = r = np.ones((1, 1, 1))                           # the model's Q and R
+    every = np.ones(n_batch, bool)
+    return lambda: kalman.predict_update(state, x.copy(), one, qd, y, x.copy(), one, r, every,
+                                         every)
 
 
 @contextmanager
@@ -98,10 +92,8 @@ def _no_op(*args: Any) -> None:
 
 def model_evaluation(estimator: Any) -> Any:
     """What an EKF step must evaluate of the plant's model: ``f, F`` and ``h, H`` (batched)."""
-    from fir_gym.estimators.extended import model_callables, model_linearizer
-
-    linearize, (_, _, h, H) = model_linearizer(estimator.model), model_callables(
-        estimator.model)
+    model = estimator.model
+    linearize, (_, _, h, H) = model.unchecked_linearizer(), model.unchecked_callables()
     x, u = estimator.x, np.zeros((estimator.x.shape[0], estimator.model.n_u))
 
     def evaluate() -> None:

@@ -139,6 +139,7 @@ class PlantVectorEntryPoint:
         if not (isinstance(plant_class, type) and issubclass(plant_class, PlantEnv)):
             raise TypeError(f"the native vector env needs a fir-gym plant class; {self.plant!r} "
                             f"is {plant_class!r}")
+        plant_class.check_vector_options(kwargs)
         return PlantVectorEnv(plant_class, num_envs=num_envs, **kwargs)
 
     def __repr__(self) -> str:
