@@ -291,9 +291,9 @@ def test_a_cost_function_needs_its_cap_and_gives_no_design_point():
     assert weighted.design_point().M[0, 0] == 1.0
 
 
-@pytest.mark.slow
 def test_ppo_trains_on_the_ekf_estimate():
-    """20 000 PPO steps on make_sb3_vec_env (the issue's acceptance; ~1 min on 2 cores)."""
+    """20 000 PPO steps on make_sb3_vec_env (the issue's acceptance, in the default run;
+    about a minute on 2 cores)."""
     from stable_baselines3 import PPO
 
     from fir_gym.training import make_sb3_vec_env
