@@ -1,5 +1,5 @@
 """The report's pieces: the verdict vocabulary and its rules, sentences formatted from values,
-the layout (setup and readings one line each, reasons as footnotes)."""
+the layout (setup one line, readings a legend one a line, reasons as footnotes)."""
 
 import pickle
 
@@ -64,11 +64,13 @@ def test_the_vocabulary_is_closed():
 
 def test_layout_puts_setup_readings_and_reasons_around_a_short_table():
     r = Report("999", "test")
-    s = r.summary("Table 9", say("setup with {n} runs", n=3), {"a": "first reading"})
+    s = r.summary("Table 9", say("setup with {n} runs", n=3),
+                  {"a": "first reading", "b": "second reading"})
     s.compare("q1", Printed("1.0"), 1.01, "a", "reproduced", "the reason")
     s.compare("q2", Printed("2.0"), 2.5, "a", "not reproduced: differs", "the reason")
     text = r.to_text(markdown=True)
-    assert "Setup: setup with 3 runs" in text and "Readings: a = first reading" in text
+    assert "Setup: setup with 3 runs" in text
+    assert "Readings:\n- a = first reading\n- b = second reading\n" in text   # a legend
     assert "- [1] the reason" in text and text.count("[1]") == 3    # one footnote, two refs
     header = next(line for line in text.splitlines() if line.startswith("| quantity"))
     assert [h.strip() for h in header.strip("|").split("|")] == [
