@@ -143,10 +143,15 @@ class Runner:
             return self._n_jobs() + 1
         return sum(self._dask_client().nthreads().values()) + 1
 
-    def bar(self, desc: str | None = None) -> Any:
-        """A progress bar whose total grows as tasks are handed out (``add(n)``, ``update()``,
-        ``close()``); silent without ``progress`` or tqdm."""
-        bar = self._bar([], desc, total=0)
+    def bar(self, desc: str | None = None) -> _Progress:
+        """A progress bar for work whose size is learnt on the way (``add(n)`` as tasks become
+        known, ``update()``, ``close()``); silent without ``progress`` or tqdm.
+
+        A plan's follow-up stage is known only once its own stage is done, so the total
+        grows: the bar shows the tasks done and those known so far, and no percentage or
+        time remaining (:data:`GROWING_BAR_FORMAT`), which a growing total would make a guess.
+        """
+        bar = self._bar([], desc, total=0, bar_format=GROWING_BAR_FORMAT)
         return _Progress(bar if hasattr(bar, "update") else None)
 
     def _map_now(self, fn: Callable[[Any], Any], items: list[Any], desc: str | None
@@ -241,15 +246,19 @@ class Runner:
                 self._client = Client(self._cluster)
         return self._client
 
-    def _bar(self, iterable: Iterable[Any], desc: str | None, total: int | None = None
-             ) -> Iterable[Any]:
+    def _bar(self, iterable: Iterable[Any], desc: str | None, total: int | None = None,
+             bar_format: str | None = None) -> Iterable[Any]:
         if not self.progress:
             return iterable
         try:
             from tqdm.auto import tqdm
         except ImportError:  # tqdm is a dependency; a stripped install just shows no bars
             return iterable
-        return tqdm(iterable, desc=desc, total=total, leave=False)
+        return tqdm(iterable, desc=desc, total=total, leave=False, bar_format=bar_format)
+
+
+#: the line of :meth:`Runner.bar`: counts and the time elapsed, no percentage and no ETA
+GROWING_BAR_FORMAT = "{desc}: {n_fmt} tasks done of {total_fmt} known so far [{elapsed}]"
 
 
 class _Progress:
@@ -269,6 +278,10 @@ class _Progress:
     def close(self) -> None:
         if self._bar is not None:
             self._bar.close()
+
+    def line(self) -> str:
+        """The bar's current line as drawn ("" without a bar)."""
+        return "" if self._bar is None else str(self._bar)
 
 
 class LimitedBlas:

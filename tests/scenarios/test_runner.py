@@ -231,3 +231,25 @@ def test_a_failing_task_fails_the_map_and_the_runner_stays_usable():
         with pytest.raises(TypeError):
             runner.map(noisy_task, [*TASKS, ("not a seed", 1.0)])
         assert len(runner.map(noisy_task, TASKS)) == len(TASKS)
+
+
+def test_the_reproduce_bar_shows_counts_and_no_time_remaining():
+    """The total of :meth:`Runner.bar` grows as follow-up stages become known, so its line
+    shows the tasks done and known so far and the time elapsed, never a percentage or an
+    ETA (tqdm's ``<remaining``); rendered as text, no terminal needed. Without ``progress``
+    it draws nothing."""
+    bar = Runner("serial", progress=True).bar("reproduce")
+    try:
+        bar.add(3)
+        bar.update()
+        bar.add(2)                        # a follow-up stage: the total grows
+        bar.update(2)
+        line = bar.line()
+    finally:
+        bar.close()
+    assert line.startswith("reproduce: 3 tasks done of 5 known so far [")
+    assert "%" not in line and "<" not in line and "?" not in line and "it/s" not in line
+    silent = Runner("serial").bar("reproduce")
+    silent.add(3)
+    silent.update()
+    assert silent.line() == ""
