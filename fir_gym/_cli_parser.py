@@ -159,7 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "the paper, and the sweeps beyond them")
     p.add_argument("--seed", type=int, default=0, help="seed of every episode")
     p.add_argument("--out", type=str, default=None,
-                   help="folder for REPORT.md and its figures (default: print only)")
+                   help="folder for REPORT.md and its figures; the terminal then gets the "
+                        "verdict counts per paper and the report's path (default: no files, "
+                        "the whole report printed)")
     p.add_argument("--markdown", action="store_true", help="print Markdown tables")
     p.add_argument("--quick", action="store_true",
                    help="small Monte Carlo sizes (the numbers are noisier)")

@@ -47,44 +47,58 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from .scenarios import SCENARIOS, episodes
-    from .scenarios.figures import save_figures, with_figures
-    from .scenarios.plan import execute
-    from .scenarios.report import vocabulary, write_report
-    from .scenarios.runner import Runner
+    """Run every experiment chosen. With ``--out``: write REPORT.md and its figures there and
+    print the verdict counts per paper and the report's path; without: print the whole
+    report, then the counts. Either way the command's wall and CPU time (its worker
+    processes' included) end it, on stderr: never in the report, which stays the same
+    bytes for the same seed."""
+    from .scenarios.stopwatch import Stopwatch
 
-    out = Path(args.out) if args.out else None
-    papers = [p for group in (args.paper or []) for p in group]
-    wanted = [name for name in SCENARIOS
-              if not papers or name.removeprefix("paper") in papers]
-    # the runner first: a missing extra (--backend dask) fails before any work is done
-    with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
-                progress=not args.no_progress) as runner:
-        names = [f"fir_gym.scenarios.{name}" for name in wanted]
-        drawing = ["fir_gym.scenarios.figures", "fir_gym.plotting"] if out else []
-        # the workers start and import the scenarios (and the plotting) while this process
-        # does the same: their start-up is off the critical path
-        runner.start(["fir_gym.scenarios.episodes", *names, *drawing])
+    with Stopwatch() as watch:
+        from .scenarios import SCENARIOS, episodes
+        from .scenarios.figures import save_figures, with_figures
+        from .scenarios.plan import execute
+        from .scenarios.report import vocabulary, write_report
+        from .scenarios.runner import Runner
+        from .scenarios.summary import summary_text
+
+        out = Path(args.out) if args.out else None
+        papers = [p for group in (args.paper or []) for p in group]
+        wanted = [name for name in SCENARIOS
+                  if not papers or name.removeprefix("paper") in papers]
+        # the runner first: a missing extra (--backend dask) fails before any work is done
+        with Runner(args.backend, jobs=args.jobs, scheduler=args.scheduler,
+                    progress=not args.no_progress) as runner:
+            names = [f"fir_gym.scenarios.{name}" for name in wanted]
+            drawing = ["fir_gym.scenarios.figures", "fir_gym.plotting"] if out else []
+            # the workers start and import the scenarios (and the plotting) while this
+            # process does the same: their start-up is off the critical path
+            runner.start(["fir_gym.scenarios.episodes", *names, *drawing])
+            if out:
+                out.mkdir(parents=True, exist_ok=True)
+            modules = [importlib.import_module(name) for name in names]
+            plans = [m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
+            if out:  # each scenario's figures: a task of the runner once its report is final
+                plans = [with_figures(p, name) for p, name in zip(plans, wanted, strict=True)]
+            # every scenario's tasks in one pool of work: a follow-up stage goes out as soon
+            # as its own stage is done, so the workers stay busy across stages and scenarios
+            summaries, *done = execute([episodes.plan(seed=args.seed), *plans], runner,
+                                       desc="reproduce")
+        reports = [save_figures(d, out) for d in done] if out else done
+        headers, rows = episodes.summary_rows(summaries)
         if out:
-            out.mkdir(parents=True, exist_ok=True)
-        modules = [importlib.import_module(name) for name in names]
-        plans = [m.plan(seed=args.seed, quick=args.quick, runs=args.runs) for m in modules]
-        if out:      # each scenario's figures: a task of the runner once its report is final
-            plans = [with_figures(p, name) for p, name in zip(plans, wanted, strict=True)]
-        # every scenario's tasks in one pool of work: a follow-up stage goes out as soon as
-        # its own stage is done, so the workers stay busy across stages and scenarios
-        summaries, *done = execute([episodes.plan(seed=args.seed), *plans], runner,
-                                   desc="reproduce")
-    reports = [save_figures(d, out) for d in done] if out else done
-    headers, rows = episodes.summary_rows(summaries)
-    print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
-    print(f"Scripted episodes (one per environment, seed {args.seed})\n")
-    print(format_table(headers, rows, markdown=args.markdown))
-    for report in reports:
-        print("\n" + report.to_text(markdown=args.markdown))
-    if out:
-        path = write_report(out, reports, episodes_table=(headers, rows))
+            path = write_report(out, reports, episodes_table=(headers, rows))
+    if out:          # the report is in the file: the terminal gets its summary and path
+        print(summary_text(reports))
         print(f"\nwrote {path}")
+    else:
+        print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
+        print(f"Scripted episodes (one per environment, seed {args.seed})\n")
+        print(format_table(headers, rows, markdown=args.markdown))
+        for report in reports:
+            print("\n" + report.to_text(markdown=args.markdown))
+        print("\n" + summary_text(reports))
+    print(watch.line("fir-gym reproduce"), file=sys.stderr)
     return 0
 
 

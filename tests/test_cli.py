@@ -1,20 +1,44 @@
 """The fir-gym command."""
 
+import re
+
 import pytest
 
 import fir_gym
 from fir_gym.cli import main
 
 
-def test_reproduce_prints_one_block_per_environment(capsys, tmp_path):
+def test_reproduce_with_out_prints_the_verdict_counts_the_path_and_its_time(capsys, tmp_path):
+    """With --out the report goes to the file (one block per environment, the paper's
+    section); the terminal gets the verdict counts per paper, the path, and on stderr the
+    command's wall and CPU time, which the report does not carry."""
+    from fir_gym.scenarios.summary import COLUMNS
+
     assert main(["reproduce", "--seed", "3", "--quick", "--paper", "003", "--runs", "2",
                  "--no-progress", "--out", str(tmp_path)]) == 0
-    out = capsys.readouterr().out
-    for env_id in fir_gym.ENV_IDS:
-        assert env_id.split("/")[-1] in out
+    captured = capsys.readouterr()
     report = (tmp_path / "REPORT.md").read_text()
+    for env_id in fir_gym.ENV_IDS:
+        assert env_id.split("/")[-1] in report
     assert "## Scripted episodes" in report and "## Paper 003" in report
-    assert "Paper 001" not in out
+    lines = captured.out.splitlines()
+    assert lines[-1] == f"wrote {tmp_path / 'REPORT.md'}"
+    assert len(lines) < 12                                  # a summary, not the report
+    header = next(line for line in lines if line.startswith("paper"))
+    assert header.split()[-1] == "rows" and all(c.split()[0] in header for c in COLUMNS)
+    assert any(line.startswith("Paper 003 ") for line in lines) and "Paper 001" not in captured.out
+    assert "Setup:" not in captured.out and "| quantity" not in captured.out
+    timing = captured.err.strip().splitlines()[-1]
+    assert re.fullmatch(r"fir-gym reproduce took [\d.]+ s wall, [\d.]+ s CPU \([\d.]+ s this "
+                        r"process, [\d.]+ s worker processes\)", timing), timing
+    assert " s wall" not in report and " CPU" not in report
+
+
+def test_reproduce_without_out_prints_the_whole_report(capsys):
+    assert main(["reproduce", "--quick", "--paper", "002", "--runs", "2", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "Verdicts" in out and "Scripted episodes" in out and "Paper 002" in out
+    assert "Setup:" in out and out.rstrip().splitlines()[-1].startswith("all ")
 
 
 def test_reproduce_rejects_unknown_papers():
