@@ -287,6 +287,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True,
                    help="the video file: FILE.gif or FILE.mp4 (required)")
 
+    p = command("record", "write episodes as a Minari dataset (offline-RL data)",
+                description="Play episodes with an estimator in the loop and write them as a "
+                            "Minari dataset: the observations the controller saw, and the true "
+                            "state, measurement, estimate, covariance and active conditions "
+                            "in each step's infos. Episode i uses seed SEED+i. Needs the "
+                            'dataset extra: pip install "fir-gym[dataset]".')
+    p.add_argument("--env", default=None,
+                   help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
+                        "the run's)")
+    p.add_argument("--estimator", default=None,
+                   help="the estimator in the loop, a registry name such as ekf (default "
+                        "with a run that observes an estimator: that one)")
+    p.add_argument("--policy", default="zero", metavar="|".join((*WATCH_POLICIES, "RUN")),
+                   help="'zero' (no action), 'lqg' (the LQR of the plant's nominal model on "
+                        "the estimate) or a run folder written by `fir-gym train`")
+    p.add_argument("--episodes", type=positive_int, default=10, help="how many episodes")
+    p.add_argument("--seed", type=int, default=0, help="the first episode's seed")
+    p.add_argument("--steps", type=positive_int, default=None,
+                   help="at most this many steps per episode (default: the whole episode)")
+    p.add_argument("--estimator-kwargs", type=json_dict, metavar="JSON", default={},
+                   help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
+                        "(default: none)")
+    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
+                   help="JSON object of gym.make options, e.g. '{\"sensor_faults\": "
+                        "{\"dropout\": 0.1}}' (default: none)")
+    p.add_argument("--dataset-id", default=None,
+                   help="Minari's namespace/name-vN (default: "
+                        "fir_gym/<plant>-<estimator>-<policy>-v0)")
+    p.add_argument("--out", required=True,
+                   help="the datasets' folder (Minari's MINARI_DATASETS_PATH); the dataset "
+                        "goes to OUT/<dataset-id> (required)")
+
     for name in ("speed", "bench"):
         # parsed by the speed benchmark itself (fir_gym.cli.main hands it every argument);
         # listed here for `fir-gym --help`

@@ -315,10 +315,23 @@ def cmd_watch(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_record(args: argparse.Namespace) -> int:
+    from .record import record
+
+    data = record(args.env, args.out, estimator=args.estimator, policy=args.policy,
+                  episodes=args.episodes, seed=args.seed, steps=args.steps,
+                  estimator_kwargs=args.estimator_kwargs, env_kwargs=args.env_kwargs,
+                  dataset_id=args.dataset_id)
+    print(f"wrote {data.dataset_id} to {data.path}: {data.episodes} episodes, {data.steps} "
+          f"steps (read it with MINARI_DATASETS_PATH={args.out} and "
+          f"minari.load_dataset({data.dataset_id!r}))")
+    return 0
+
+
 #: the subcommand a parsed command line names -> the function that runs it (``speed`` and
 #: ``bench`` hand their raw arguments to :func:`cmd_speed`; :func:`fir_gym.cli.main`)
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "list": cmd_list, "reproduce": cmd_reproduce, "train": cmd_train,
     "evaluate": cmd_evaluate, "compare-controllers": cmd_compare,
     "benchmark-controllers": cmd_benchmark, "benchmark-robustness": cmd_robustness,
-    "watch": cmd_watch}
+    "watch": cmd_watch, "record": cmd_record}

@@ -17,6 +17,7 @@ INSTALL = {
     "video": 'pip install "fir-gym[video]"',
     "bench": 'pip install "fir-gym[bench]"',
     "docs": 'pip install "fir-gym[docs]"',
+    "dataset": 'pip install "fir-gym[dataset]"',
 }
 
 #: top-level module -> (the package's name, the extra that installs it)
@@ -32,6 +33,8 @@ MODULES = {
     "imageio_ffmpeg": ("imageio-ffmpeg", "video"),
     "filterpy": ("filterpy", "bench"),
     "mkdocs": ("MkDocs", "docs"),
+    "minari": ("Minari", "dataset"),
+    "h5py": ("h5py", "dataset"),
 }
 
 
