@@ -325,7 +325,7 @@ def _notes(report: Report, res: dict[tuple[float | None, str], dict[str, Any]]) 
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """The bounds and the exact degradations against the horizon T, with Table 1's entries."""
-    from ._plotting import new_figure, save
+    from ._plotting import MARKERS, coincidence_note, coincident, legend_outside, new_figure, save
 
     c, kal = report.figures["curve"], report.figures["kalman"]
     fig, ax = new_figure(1, 2, width=11.0, height=4.0)
@@ -334,18 +334,27 @@ def plot(report: Report, out_dir: str | Path) -> None:
             (ax[0], "dpi1", "Δπ₁ (noise uncertainty)", "exact1", "lemma1"),
             (ax[1], "dpi2", "Δπ₂ (model uncertainty)", "exact2", None)):
         ours = "dpi1_end" if key == "dpi1" else key
-        a.semilogy(c["T"], c[ours], "o-", color="C0", label=f"{label}: ours (pert, Φ(T,τ))")
+        # (curve, marker and line style, colour, label); a curve hidden under an earlier one
+        # is named as such in the legend and drawn with a smaller marker on top
+        curves = [(c[ours], "o-", "C0", "ours (pert, Φ(T,τ))")]
         if key == "dpi1":
-            a.semilogy(c["T"], c["dpi1_start"], "d-.", color="C4", label="ours, Φ(τ,0) reading")
+            curves.append((c["dpi1_start"], "d-.", "C4", "ours, Φ(τ,0) reading"))
         if bound:
-            a.semilogy(c["T"], c[bound], "s--", color="C2", label="valid bound via Lemma 1")
-        a.semilogy(c["T"], c[exact], "^:", color="C1", label="exact worst-corner tr(R_r − R)")
+            curves.append((c[bound], "s--", "C2", "valid bound via Lemma 1"))
+        curves.append((c[exact], "^:", "C1", "exact worst-corner tr(R_r − R)"))
+        same = coincident({name: values for values, _, _, name in curves})
+        for j, (values, style, colour, name) in enumerate(curves):
+            size = 4.0 if name in same else 6.0
+            marker = MARKERS[j] if name in same else style[0]
+            a.semilogy(c["T"], values, marker + style[1:], ms=size, color=colour,
+                       label=coincidence_note(name, same))
         paper = [float(v) for v in PAPER_TABLE1[key]]
         a.semilogy(finite, paper[:-1], "kx", ms=9, label="paper, Table 1")
         a.axhline(paper[-1], color="k", ls="--", lw=0.8, label="paper, Kalman")
         a.axhline(kal[ours], color="C0", ls="--", lw=0.8, label="ours, Kalman")
         a.axhline(kal[exact], color="C1", ls=":", lw=0.8, label="exact, Kalman")
         a.set_xlabel("FIR horizon T (s)")
+        a.set_ylabel(f"{label.split()[0]}: increase of the error\ncovariance trace (state units²)")
         a.set_title(f"Paper 001: {label}", fontsize=9)
-        a.legend(fontsize=6)
+        legend_outside(a, below=True, ncol=2)
     save(report, out_dir, "bounds_vs_T", fig, "Paper 001: bounds and exact degradation vs T")

@@ -290,12 +290,13 @@ def _notes(report: Report, scores: dict[str, dict[str, Any]], n_runs: int,
 def plot(report: Report, out_dir: str | Path) -> None:
     """Fig. 1 of paper 002: truth, measurements and estimates of one run."""
     from ..plotting import plot_estimates
-    from ._plotting import new_figure, save
+    from ._plotting import legend_outside, new_figure, save
 
     r0 = report.figures["run0"]
     t = r0["t"]
-    fig, ax = new_figure(2, 1, height=3.0, sharex=True)
-    names = [f"x{i + 1}" for i in range(len(ax))]
+    fig, ax = new_figure(2, 1, width=10.0, height=3.0, sharex=True)
+    # the Van der Pol state is dimensionless
+    names = [f"x{i + 1} (dimensionless)" for i in range(len(ax))]
     # truth and measurement once, then each filter's estimate on the same panels
     plot_estimates(t, r0["estimates"][BPF], r0["x"], measurement=r0["y"], names=names,
                    label=BPF, color="C0", axes=ax)
@@ -304,7 +305,7 @@ def plot(report: Report, out_dir: str | Path) -> None:
     for a in ax:
         a.lines[-1].set_linestyle("--")                          # the CD-EKF's line
     ax[0].set_ylim(np.nanmin(r0["x"][:, 0]) - 4, np.nanmax(r0["x"][:, 0]) + 4)
-    ax[0].legend(fontsize=7)
+    legend_outside(ax[0])
     ax[1].set_xlabel("t (s)")
     ax[0].set_title(f"Paper 002 Fig. 1: Van der Pol, estimated and real states (run 0, {DEFAULT})")
     save(report, out_dir, "fig1_vdp", fig, "Paper 002 Fig. 1: truth and estimates (one run)")

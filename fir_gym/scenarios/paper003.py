@@ -305,23 +305,24 @@ def run(seed: int = 0, quick: bool = False, runs: int | None = None,
 def plot(report: Report, out_dir: str | Path) -> None:
     """Figs 3–5 of paper 003 (the default cell): states, parameter estimates and errors."""
     from ..plotting import plot_estimates
-    from ._plotting import new_figure, save
+    from ._plotting import legend_outside, new_figure, save
 
     s = report.figures["series"]
     t = s["t"]
     names = ("x (m)", "ẋ (m/s)", "θ (rad)", "θ̇ (rad/s)")
-    fig, ax = new_figure(4, 1, height=1.9, sharex=True)
+    fig, ax = new_figure(4, 1, width=10.0, height=1.9, sharex=True)
     plot_estimates(t, s["ukf"][:, :4], s["X"], measurement=s["Y"], names=names, label="UKF",
                    color="C0", axes=ax)
-    ax[0].legend(fontsize=7, ncol=3)
+    legend_outside(ax[0])
     ax[-1].set_xlabel("t (s)")
     ax[0].set_title(f"Paper 003 Fig. 3: estimated states (run 0, {DEFAULT})")
     save(report, out_dir, "fig3_states", fig, "Paper 003 Fig. 3: estimated states")
     truth = np.array([TRUE[p] for p in PARAMS])
     for fig_no, errors in ((4, False), (5, True)):
-        fig, ax = new_figure(2, 1, height=2.4, sharex=True)
+        fig, ax = new_figure(2, 1, width=10.0, height=2.4, sharex=True)
         shift = truth if errors else 0.0
-        labels = [f"{p} error" if errors else p for p in PARAMS]
+        units = {"mu": "dimensionless", "M0": "N m s/rad"}          # the slider's friction
+        labels = [f"{p} error ({units[p]})" if errors else f"{p} ({units[p]})" for p in PARAMS]
         # the Monte Carlo mean ± one standard deviation over the runs, then run 0
         plot_estimates(t, s["param_mean"] - shift, covariance=s["param_std"] ** 2, sigma=1,
                        names=labels, label="UKF, Monte-Carlo mean", color="C1", axes=ax)
@@ -331,7 +332,7 @@ def plot(report: Report, out_dir: str | Path) -> None:
             a.axhline(0.0 if errors else TRUE[name], color="k", ls="--", lw=0.8,
                       label="zero error" if errors else "true value")
             a.set_ylim(-0.1 if errors else 0.1, 0.1 if errors else 0.3)
-        ax[0].legend(fontsize=7)
+        legend_outside(ax[0])
         ax[-1].set_xlabel("t (s)")
         ax[0].set_title(f"Paper 003 Fig. {fig_no}: "
                         + ("errors of the estimated parameters" if errors

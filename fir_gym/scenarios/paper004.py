@@ -190,11 +190,11 @@ def run(seed: int = 0, quick: bool = False, runs: int | None = None,
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """RMSE vs window length (the future-work comparison) and the recursion's round-off growth."""
-    from ._plotting import new_figure, save
+    from ._plotting import legend_outside, new_figure, save
 
     comp = report.figures["comparison"]
     s = summary(comp)
-    fig, ax = new_figure(1, 1, width=7.0, height=4.0)
+    fig, ax = new_figure(1, 1, width=10.0, height=4.0)
     a = ax[0]
     dt = comp["dt"]
     for i, family in enumerate(("FIR, no prior (Cor 2.2)", "FIR, stationary prior (Cor 2.1)")):
@@ -206,9 +206,10 @@ def plot(report: Report, out_dir: str | Path) -> None:
         a.axhline(comp["rmse"][corner][("KF", None)][0], ls=ls, color="C3",
                   label=f"KF, {corner_label(corner)}")
     a.set_xlabel("window length (s)")
-    a.set_ylabel("x₁ RMSE")
-    a.set_title("Paper 004 future work: FIR vs KF on CarrierMotion-v0 under model uncertainty")
-    a.legend(fontsize=7)
+    a.set_ylabel("x₁ (deck displacement) RMSE\n(units of x₁)")
+    a.set_title("Paper 004 future work: FIR vs KF on CarrierMotion-v0 under model uncertainty",
+                fontsize=9)
+    legend_outside(a)
     save(report, out_dir, "fir_vs_kf", fig, "Paper 004: FIR vs KF, RMSE vs window length")
 
     rec = report.figures["recursion"]
@@ -221,8 +222,8 @@ def plot(report: Report, out_dir: str | Path) -> None:
             a.semilogy(k, np.maximum(v["dev_reinit"], 1e-18), ":", color=f"C{i}",
                        label=f"{form}, re-init every {v['reinit_every']}")
         a.set_title(name, fontsize=9)
-        a.set_xlabel("k")
-        a.legend(fontsize=6)
-    ax[0].set_ylabel("|recursive − direct| / max|direct|")
+        a.set_xlabel("k (steps)")
+        a.set_ylabel("|recursive − direct| / max|direct|\n(relative, dimensionless)")
+        legend_outside(a, below=True, fontsize=6)
     save(report, out_dir, "recursion_roundoff", fig,
          "Paper 004: round-off growth of the recursive FIR filter")

@@ -230,31 +230,40 @@ def _fill(report: Report) -> None:
 
 def plot(report: Report, out_dir: str | Path) -> None:
     """RMSE vs window length per mismatch (with EKF/UKF), and recovery time vs δ."""
-    from ._plotting import new_figure, save
+    from ._plotting import MARKERS, coincidence_note, coincident, legend_outside, new_figure, save
 
     f = report.figures
     fig, ax = new_figure(1, 2, width=11.0, height=4.0)
-    for i, r in enumerate(f["ratios"]):
-        ax[0].loglog(f["windows"], [f["grid"][(r, "EFIR", N)] for N in f["windows"]], "o-",
-                     color=f"C{i}", label=f"EFIR, μ ratio {r:.4g}")
+    # curves that coincide (the EFIR's RMSE barely depends on the mismatch) are named as
+    # such in the legend, each drawn with its own marker, smaller than the one before
+    efir = {f"EFIR, μ ratio {r:.4g}": [f["grid"][(r, "EFIR", N)] for N in f["windows"]]
+            for r in f["ratios"]}
+    same = coincident(efir)
+    for i, (r, (name, values)) in enumerate(zip(f["ratios"], efir.items(), strict=True)):
+        ax[0].loglog(f["windows"], values, "-", marker=MARKERS[i % len(MARKERS)],
+                     ms=max(7.0 - 1.2 * i, 2.0), color=f"C{i}",
+                     label=coincidence_note(name, same))
         ax[0].axhline(f["grid"][(r, "EKF", None)], ls="--", color=f"C{i}",
                       label=f"EKF, μ ratio {r:.4g}")
     ax[0].axhline(f["sigma_v"], color="k", ls=":", label="σ_v")
     ax[0].set_xlabel("EFIR window N (measurements)")
-    ax[0].set_ylabel("x₁ RMSE")
+    ax[0].set_ylabel("x₁ RMSE (length units)")
     ax[0].set_title("Orbit-v0: model mismatch × window", fontsize=9)
-    ax[0].legend(fontsize=6)
+    legend_outside(ax[0], below=True, ncol=2, fontsize=6)
     rec, steps = f["recovery"], f["osc_steps"]
     deltas = list(rec)
     cap = steps - WINDOW[1]
-    for i, name in enumerate(next(iter(rec.values()))):
-        vals = [cap if rec[d][name]["recovery"] is None else rec[d][name]["recovery"]
-                for d in deltas]
-        ax[1].plot(deltas, vals, "o-", color=f"C{i}", label=name)
+    recovery = {name: [cap if rec[d][name]["recovery"] is None else rec[d][name]["recovery"]
+                       for d in deltas] for name in next(iter(rec.values()))}
+    same = coincident(recovery)
+    for i, (name, vals) in enumerate(recovery.items()):
+        ax[1].plot(deltas, vals, "-", marker=MARKERS[i % len(MARKERS)],
+                   ms=max(7.0 - 1.2 * i, 2.0), color=f"C{i}",
+                   label=coincidence_note(name, same))
     ax[1].set_yscale("symlog", linthresh=1.0)
     ax[1].axhline(cap, color="k", ls=":", label="end of run (not recovered)")
-    ax[1].set_xlabel("δ on k = 350..400")
+    ax[1].set_xlabel("δ on k = 350..400 (relative, dimensionless)")
     ax[1].set_ylabel("recovery time (steps)")
     ax[1].set_title("UncertainOscillator-v0 (printed reading): recovery", fontsize=9)
-    ax[1].legend(fontsize=6)
+    legend_outside(ax[1], below=True, ncol=2, fontsize=6)
     save(report, out_dir, "sweeps", fig, "Sweeps: mismatch × window; recovery time vs δ")

@@ -76,3 +76,58 @@ def test_a_figure_task_draws_what_plot_writes(tmp_path):
         assert (tmp_path / "task" / path).read_bytes() == (tmp_path / "direct" / path).read_bytes()
     images, files = draw_task(("paper002", direct))
     assert images == direct.images and set(files) == set(direct.images.values())
+
+
+def test_every_figure_the_report_writes_has_labelled_axes_and_legends_off_the_data(
+        quick_report, tiny_sweep, tmp_path, monkeypatch):
+    """Draw every scenario's figures and inspect each Figure as it is saved: every panel has
+    a y label and an x label (its own, or that of a panel sharing its x axis), and every
+    legend lies outside its panel. The number of figures inspected is the number of files
+    written and of images the reports list, so the check cannot pass on no figure."""
+    import importlib
+
+    from matplotlib.figure import Figure
+
+    from fir_gym.scenarios._plotting import unlabelled_axes
+
+    inspected = []
+    savefig = Figure.savefig
+
+    def inspect(fig, path, *args, **kwargs):
+        out = savefig(fig, path, *args, **kwargs)
+        renderer = fig.canvas.get_renderer()
+        overlaps = []
+        for ax in fig.get_axes():
+            legend = ax.get_legend()
+            if legend is not None:
+                box, panel = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
+                width = min(box.x1, panel.x1) - max(box.x0, panel.x0)
+                height = min(box.y1, panel.y1) - max(box.y0, panel.y0)
+                if width > 1 and height > 1:
+                    overlaps.append(ax.get_title())
+        inspected.append((Path(path).name, unlabelled_axes(fig), overlaps))
+        return out
+
+    monkeypatch.setattr(Figure, "savefig", inspect)
+    images = 0
+    for name in SCENARIOS:
+        report = (tiny_sweep.run(seed=0, quick=True) if name == "sweeps"
+                  else quick_report(name))
+        report.images = {}
+        importlib.import_module(f"fir_gym.scenarios.{name}").plot(report, tmp_path)
+        images += len(report.images)
+    written = sorted(p.name for p in (tmp_path / "figures").glob("*.png"))
+    assert len(inspected) == len(written) == images >= len(SCENARIOS)
+    assert sorted(name for name, _, _ in inspected) == written
+    for name, unlabelled, overlaps in inspected:
+        assert not unlabelled, f"{name}: panels without an axis label: {unlabelled}"
+        assert not overlaps, f"{name}: legends over the data of {overlaps}"
+
+
+def test_coinciding_curves_are_found_from_their_values():
+    from fir_gym.scenarios._plotting import coincidence_note, coincident
+
+    same = coincident({"a": [1.0, 2.0], "b": [1.001, 2.0], "c": [1.2, 2.0], "d": [1.0]})
+    assert same == {"b": "a"}
+    assert coincidence_note("b", same) == "b (coincides with a)"
+    assert coincidence_note("c", same) == "c"
