@@ -8,7 +8,8 @@ ring where the estimate puts the drawing's bodies), its ``±2σ`` region (the
 covariance carried to pixels through the Jacobian of the state-to-pixel map: an
 ellipse, or an error bar where the picture moves along one direction only), the
 measurement (a cross, or a line where the measurement leaves a direction open), a
-legend and the time. :class:`~fir_gym.wrappers.EstimatorObservation` and
+legend and the time; a region too small to see on the frame is drawn magnified in an
+inset (:mod:`fir_gym.envs._inset`). :class:`~fir_gym.wrappers.EstimatorObservation` and
 :class:`~fir_gym.wrappers.VectorEstimatorObservation` call it from their ``render()``.
 
 A plant takes part through two hooks, both in its world coordinates:
@@ -27,23 +28,18 @@ never raises on the numbers it is given.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._draw import ACCENT, BACKGROUND, ESTIMATE, GREY, INK, MEASUREMENT, Canvas, Color
-from ._font import ADVANCE, GLYPH_HEIGHT
+from ._draw import ACCENT, ESTIMATE, MEASUREMENT, Canvas, Color
+from ._inset import Mark, Region, draw_insets
+from ._pen import RING_RADIUS, Pen
 
 FloatArray = NDArray[np.float64]
-
-#: pixels: the estimate's ring, the measurement's cross, the error bar's caps
-RING_RADIUS, CROSS_SIZE, CAP = 6.0, 4.0, 3.0
-#: a point this far outside the frame (pixels) is not drawn
-FAR = 1e5
 
 
 @dataclass(frozen=True)
@@ -176,6 +172,8 @@ class EstimateDrawing:
         sigma: float = 2.0,
         diverged: bool = False,
         view: FrameView | None = None,
+        truth: ArrayLike | None = None,
+        inset: bool = True,
     ) -> NDArray[np.uint8]:
         """A copy of ``frame`` (one this plant rendered) with an estimate drawn over it.
 
@@ -191,15 +189,28 @@ class EstimateDrawing:
             sigma: the size of the region, in standard deviations.
             diverged: say "diverged" under the time.
             view: the frame's view (default: that of the last frame rendered).
+            truth: the true state, drawn in an inset (default: the plant's own state
+                when ``view`` is the last frame's; none with another ``view``).
+            inset: where a region is too small to see on the frame, draw it magnified in
+                a box in a bottom corner (:mod:`fir_gym.envs._inset`), with the truth
+                and the measurement at the same magnification.
         """
-        view = self._require_view(view)
+        given_view, view = view, self._require_view(view)
         image = np.array(frame, dtype=np.uint8)
         if image.shape != (view.height, view.width, 3):
             raise ValueError(f"frame must be a {view.height}x{view.width} RGB frame of this "
                              f"plant; got shape {image.shape}")
         x = self._as_state(estimate)
-        pen = _Pen(image)
+        if truth is None and given_view is None:
+            truth = getattr(self, "state", None)
+        x_true = None if truth is None else np.asarray(truth, dtype=np.float64).ravel()
+        if x_true is not None and x_true.size != x.size:
+            raise ValueError(f"truth must have {x.size} components, as the estimate; "
+                             f"got {x_true.size}")
+        pen = Pen(image)
         entries: list[tuple[str, str, Color]] = [(self.truth_label, "dot", self.truth_color)]
+        marks: list[Mark] = []
+        regions: list[Region] = []
         with np.errstate(all="ignore"):
             if measurement is not None:
                 y = np.asarray(measurement, dtype=np.float64).ravel()
@@ -207,9 +218,11 @@ class EstimateDrawing:
                     p = view.to_pixels(point)[0]
                     if direction is None:
                         pen.cross(p, MEASUREMENT)
+                        marks.append((p, None))
                     else:
-                        pen.through(p, view.to_pixels(np.asarray(point) + direction)[0] - p,
-                                    MEASUREMENT)
+                        d = view.to_pixels(np.asarray(point) + direction)[0] - p
+                        pen.through(p, d, MEASUREMENT)
+                        marks.append((p, d))
             points = view.to_pixels(self._picture(x))
             name = label
             if covariance is not None:
@@ -218,17 +231,23 @@ class EstimateDrawing:
                     raise ValueError(f"covariance must have shape {(x.size, x.size)}; "
                                      f"got {P.shape}")
                 for p, J in zip(points, self.pixel_jacobian(x, view), strict=True):
-                    pen.region(p, J @ P @ J.T, sigma, ESTIMATE)
+                    S = J @ P @ J.T
+                    pen.region(p, S, sigma, ESTIMATE)
+                    regions.append((p, S))
                 name = f"{label} ±{sigma:g}σ"
             if len(points) > 1:
                 pen.polyline(points, ESTIMATE, width=1.0)
             for p in points:
                 pen.ring(p, RING_RADIUS, ESTIMATE)
+            if inset and regions:
+                true_points = None if x_true is None else view.to_pixels(self._picture(x_true))
+                draw_insets(pen, regions, sigma, truth=true_points, marks=marks,
+                            truth_color=self.truth_color)
         entries.append((name, "ring", ESTIMATE))
         if measurement is not None:
             entries.append(("measurement", "cross", MEASUREMENT))
         pen.legend(entries)
-        pen.clock(view, diverged)
+        pen.clock(view.step, view.dt, diverged)
         return image
 
     # ------------------------------------------------------------------ helpers
@@ -246,114 +265,3 @@ class EstimateDrawing:
             raise ValueError(f"the estimate must have {n_x} components (the state "
                              f"{list(getattr(self, 'state_names', ()))}); got {x.size}")
         return x
-
-
-class _Pen:
-    """Drawing on a frame in pixel coordinates (column, row; rows grow downwards)."""
-
-    def __init__(self, image: NDArray[np.uint8]) -> None:
-        self.canvas = Canvas.over(image)
-        self.height, self.width = image.shape[:2]
-
-    def _world(self, p: Any) -> tuple[float, float] | None:
-        """The canvas's world coordinates of pixel ``p``, or None if it is not drawable."""
-        c, r = float(p[0]), float(p[1])
-        if not (math.isfinite(c) and math.isfinite(r)) or abs(c) > FAR or abs(r) > FAR:
-            return None
-        return c, self.height - r
-
-    def line(self, p: Any, q: Any, color: Color, width: float = 1.5) -> None:
-        a, b = self._world(p), self._world(q)
-        if a is not None and b is not None:
-            self.canvas.line(a[0], a[1], b[0], b[1], color, width)
-
-    def polyline(self, points: Any, color: Color, width: float = 1.5) -> None:
-        for p, q in itertools.pairwise(points):
-            self.line(p, q, color, width)
-
-    def ring(self, p: Any, radius: float, color: Color, width: float = 2.0) -> None:
-        a = self._world(p)
-        if a is not None:
-            self.canvas.ring(a[0], a[1], radius, color, width)
-
-    def dot(self, p: Any, radius: float, color: Color) -> None:
-        a = self._world(p)
-        if a is not None:
-            self.canvas.circle(a[0], a[1], radius, color)
-
-    def cross(self, p: Any, color: Color, size: float = CROSS_SIZE) -> None:
-        c, r = float(p[0]), float(p[1])
-        self.line((c - size, r - size), (c + size, r + size), color)
-        self.line((c - size, r + size), (c + size, r - size), color)
-
-    def through(self, p: Any, direction: Any, color: Color) -> None:
-        """A line through ``p`` along ``direction`` (pixels) across the whole frame."""
-        d = np.asarray(direction, dtype=np.float64)
-        norm = float(np.hypot(d[0], d[1]))
-        if not math.isfinite(norm) or norm == 0.0:
-            self.cross(p, color)
-            return
-        d = d / norm * (self.width + self.height)
-        self.line(np.asarray(p) - d, np.asarray(p) + d, color, width=1.0)
-
-    def region(self, p: Any, S: FloatArray, sigma: float, color: Color) -> None:
-        """The ``sigma`` ellipse ``{p + v : vᵀ S⁻¹ v = sigma²}`` of a pixel covariance ``S``;
-        an error bar (with caps) where it is thinner than a pixel."""
-        if not np.all(np.isfinite(S)) or self._world(p) is None:
-            return
-        w, V = np.linalg.eigh(0.5 * (S + S.T))
-        radii = sigma * np.sqrt(np.clip(w, 0.0, None))
-        if radii[1] < 1.0:                                   # smaller than a pixel
-            return
-        c = np.asarray(p, dtype=np.float64)
-        major = V[:, 1] * radii[1]
-        if radii[0] < 1.0:                                   # an error bar
-            cap = V[:, 0] * CAP
-            for end in (c - major, c + major):
-                self.line(end - cap, end + cap, color)
-            self.line(c - major, c + major, color)
-            return
-        n = int(np.clip(2 * np.pi * radii[1] / 3, 24, 240))
-        t = np.linspace(0.0, 2 * np.pi, n + 1)
-        outline = c + (np.outer(np.cos(t), V[:, 1] * radii[1])
-                       + np.outer(np.sin(t), V[:, 0] * radii[0]))
-        self.polyline(outline, color)
-
-    def legend(self, entries: list[tuple[str, str, Color]]) -> None:
-        """The legend in the top-left corner: a symbol and a name per entry."""
-        row_height, margin = GLYPH_HEIGHT + 4, 6
-        width = 26 + ADVANCE * max(len(text) for text, _, _ in entries)
-        height = 4 + row_height * len(entries)
-        self.box(margin, margin, margin + width, margin + height, BACKGROUND, GREY)
-        for i, (text, symbol, color) in enumerate(entries):
-            top = margin + 3 + i * row_height
-            centre = (margin + 11, top + GLYPH_HEIGHT / 2 - 0.5)
-            if symbol == "dot":
-                self.dot(centre, 3.5, color)
-            elif symbol == "ring":
-                self.ring(centre, 4.0, color, width=1.6)
-            else:
-                self.cross(centre, color, size=3.0)
-            self.canvas.text(margin + 20, top, text, INK)
-
-    def clock(self, view: FrameView, diverged: bool) -> None:
-        """``t = … s  (k = …)`` in the top-right corner, and "diverged" under it."""
-        decimals = int(np.clip(math.ceil(-math.log10(view.dt)) if view.dt > 0 else 2, 0, 4))
-        text = f"t = {view.time:.{decimals}f} s  k = {view.step}"
-        lines = [(text, INK)] + ([("estimator diverged", ACCENT)] if diverged else [])
-        right = self.width - 6
-        width = ADVANCE * max(len(t) for t, _ in lines) + 6
-        self.box(right - width, 6, right, 10 + (GLYPH_HEIGHT + 4) * len(lines), BACKGROUND,
-                 GREY)
-        for i, (line, color) in enumerate(lines):
-            self.canvas.text(right - width + 3, 9 + i * (GLYPH_HEIGHT + 4), line, color)
-
-    def box(self, c0: float, r0: float, c1: float, r1: float, fill: Color,
-            border: Color) -> None:
-        image = self.canvas.image
-        c0, r0 = max(int(c0), 0), max(int(r0), 0)
-        c1, r1 = min(int(c1), self.width), min(int(r1), self.height)
-        if c0 >= c1 or r0 >= r1:
-            return
-        image[r0:r1, c0:c1] = border
-        image[r0 + 1:r1 - 1, c0 + 1:c1 - 1] = fill

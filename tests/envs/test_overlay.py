@@ -155,14 +155,19 @@ def test_the_2sigma_ellipse_of_the_phase_point():
 
 
 def test_a_region_thinner_than_a_pixel_or_not_finite_draws_no_region():
+    """On the frame itself; a region that has a size is magnified in an inset instead
+    (tests/envs/test_inset.py), one without (zero, NaN) nowhere."""
     p = plant("fir_gym/VanDerPol-v0")
     frame = p.render()
     ring_only = p.draw_estimate(frame, p.state)
+    legend = slice(0, 60), slice(0, 140)
+    outside = np.ones(frame.shape[:2], dtype=bool)
+    outside[legend] = False
     for P in (np.zeros((2, 2)), np.full((2, 2), np.nan), np.diag([1e-12, 1e-12])):
-        legend = slice(0, 60), slice(0, 140)
+        drawn = p.draw_estimate(frame, p.state, P, inset=False)
+        assert np.array_equal(drawn[outside], ring_only[outside])
+    for P in (np.zeros((2, 2)), np.full((2, 2), np.nan)):
         drawn = p.draw_estimate(frame, p.state, P)
-        outside = np.ones(frame.shape[:2], dtype=bool)
-        outside[legend] = False
         assert np.array_equal(drawn[outside], ring_only[outside])
 
 

@@ -27,6 +27,7 @@ from frames import (
 from gymnasium.wrappers import HumanRendering, RenderCollection
 
 import fir_gym
+from fir_gym.envs import _inset
 from fir_gym.envs._overlay import RING_RADIUS
 from fir_gym.wrappers import EstimatorObservation, VectorEstimatorObservation
 
@@ -81,11 +82,15 @@ def test_with_an_estimator_its_marker_is_drawn_where_the_estimate_is(env_id):
 def test_the_measurement_is_drawn_and_a_filter_without_covariance_draws_no_region():
     env, framed, info = rollout_frames("fir_gym/Orbit-v0", estimator="efir")
     plant = env.unwrapped
-    marks = outside_legend(pixels_of(framed, ESTIMATE))
+    # EFIR's 2σ bar is far under a pixel: not on the frame, magnified in an inset at the
+    # bottom (envs/_inset.py, tested in tests/envs/test_inset.py), left out here
+    above_inset = lambda points: points[points[:, 1] < framed.shape[0] - _inset.MARGIN  # noqa: E731
+                                        - _inset.SIZE]
+    marks = above_inset(outside_legend(pixels_of(framed, ESTIMATE)))
     where = plant.state_to_pixels(info["estimate"])[0]
     assert len(near(marks, where, RING_RADIUS + 2)) == len(marks)       # a ring only
     y = env.get_wrapper_attr("_last_measurement")
-    crosses = outside_legend(pixels_of(framed, MEASUREMENT))
+    crosses = above_inset(outside_legend(pixels_of(framed, MEASUREMENT)))
     implied = plant_at(plant, [y[0], plant.state[1]])
     np.testing.assert_allclose(centroid(crosses), truth_centroids(implied)[0], atol=1.5)
 
