@@ -309,9 +309,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
     rec = watch(args.env, args.out, estimator=args.estimator, policy=args.policy,
                 steps=args.steps, seed=args.seed, fps=args.fps, every=args.every,
-                estimator_kwargs=args.estimator_kwargs, env_kwargs=args.env_kwargs)
-    print(f"wrote {rec.path}: {rec.frames} frames at {rec.fps:g} fps, {rec.steps} steps, "
-          f"return {rec.episode_return:.4g}")
+                estimator_kwargs=args.estimator_kwargs, env_kwargs=args.env_kwargs,
+                progress=not args.no_progress)
+    print(f"wrote {rec.path}: {rec.frames} frames at {rec.fps:g} fps ({rec.seconds:.1f} s, "
+          f"every {rec.every} steps), {rec.steps} steps, return {rec.episode_return:.4g}")
     return 0
 
 

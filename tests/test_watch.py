@@ -37,13 +37,14 @@ def mp4_frames(path):
 def test_watch_writes_a_playable_gif_of_the_wrappers_frames(tmp_path, capsys):
     out = tmp_path / "orbit.gif"
     assert main(["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf", "--steps", "20",
-                 "--seed", "4", "--out", str(out)]) == 0
+                 "--seed", "4", "--every", "1", "--out", str(out)]) == 0
     assert "21 frames" in capsys.readouterr().out
     frames = imageio.mimread(out)
     assert len(frames) == 21                                     # reset + 20 steps
     expected = expected_frames("fir_gym/Orbit-v0", "ekf", 4, 20, 1)
     for got, want in zip(frames, expected, strict=True):
         # a GIF holds a palette of 256 colours: these frames have fewer, so it is exact
+        # (each frame after the first stored as the rectangle that changed, read back whole)
         assert np.array_equal(np.asarray(got)[..., :3], want)
 
 
@@ -172,3 +173,130 @@ def test_watch_lqg_plays_the_classical_controller_evaluate_plays(tmp_path, capsy
     assert main(["watch", "--env", "fir_gym/CarrierMotion-v0", "--estimator", "kf",
                  "--policy", "lqg", "--steps", "3", "--out", str(tmp_path / "c.gif")]) == 0
     assert "4 frames" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------- frames drawn by default
+def test_the_default_every_plays_in_real_time_within_20_seconds():
+    """The rule of watch's docstring and --help: the steps of one frame in real time,
+    round(1 / (fps dt)), raised to the fewest that keep 1 + ceil(steps / every) frames
+    within 20 s at fps."""
+    from fir_gym.video import CLIP_SECONDS, default_every
+
+    assert default_every(50, 0.001, 5000) == 20          # PendulumSlider-v0, GIF: real time
+    assert default_every(100, 0.001, 5000) == 10         # its MP4 at render_fps
+    assert default_every(50, 0.01, 1000) == 2            # Orbit-v0
+    assert default_every(10, 0.1, 100) == 1              # VanDerPol-v0
+    assert default_every(10, 0.1, 1000) == 6             # CarrierMotion-v0: 100 s, sped up
+    assert default_every(30, None, None) == 1
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        fps, dt = rng.uniform(1, 120), 10 ** rng.uniform(-4, 0)
+        steps = int(rng.integers(1, 20_000))
+        every = default_every(fps, dt, steps)
+        real_time = max(1, round(1 / (fps * dt)))
+        def seconds(e, steps=steps, fps=fps):
+            return (1 + -(-steps // e)) / fps           # 1 + ceil(steps / e) frames at fps
+
+        assert every >= real_time and seconds(every) <= CLIP_SECONDS
+        assert every == real_time or seconds(every - 1) > CLIP_SECONDS   # the fewest
+
+
+@pytest.mark.parametrize(("suffix", "fps", "every"), [(".gif", 50, 20), (".mp4", 100, 10)])
+def test_watch_draws_the_pendulum_in_real_time_by_default(tmp_path, suffix, fps, every):
+    """PendulumSlider-v0 steps 1 ms and renders at 100 fps; a GIF plays at most 50 fps
+    (browsers play shorter delays as 100 ms). A frame every 1/fps s of the plant's time."""
+    from fir_gym.video import watch
+
+    rec = watch("fir_gym/PendulumSlider-v0", tmp_path / f"p{suffix}", estimator="ukf",
+                steps=100, progress=False)
+    assert (rec.fps, rec.every, rec.frames) == (fps, every, 1 + 100 // every)
+    assert rec.seconds == pytest.approx(rec.frames / fps)
+    if suffix == ".gif":
+        from PIL import Image
+
+        with Image.open(rec.path) as gif:
+            delays = []
+            for i in range(gif.n_frames):
+                gif.seek(i)
+                delays.append(gif.info["duration"])
+        assert delays == [20] * rec.frames
+
+
+def test_gif_delays_are_whole_centiseconds_that_keep_time(tmp_path):
+    """At 30 fps, frame k starts at k/30 s to the nearest centisecond: 30, 40, 30, 30, ..."""
+    from PIL import Image
+
+    from fir_gym._gif import GifStream
+
+    frame = np.zeros((20, 30, 3), dtype=np.uint8)
+    with GifStream(tmp_path / "t.gif", 30) as gif:
+        for k in range(31):
+            frame[k % 20, k % 30] = (k * 8, 255 - k * 8, 7)
+            gif.append(frame)
+    with Image.open(tmp_path / "t.gif") as im:
+        delays = []
+        for i in range(im.n_frames):
+            im.seek(i)
+            delays.append(im.info["duration"])
+    assert len(delays) == 31 and set(delays) == {30, 40}
+    starts = np.cumsum([0, *delays[:-1]])
+    assert np.all(np.abs(starts - 1000 * np.arange(31) / 30) <= 5)
+
+
+def test_watch_holds_one_frame_not_the_episode(tmp_path):
+    """The frames go to the file as they are drawn: the peak of memory (numpy's and
+    Python's, traced) does not grow with the number of frames. imageio's GIF writer held
+    every frame: 250 more Orbit-v0 frames are 90 MB."""
+    import tracemalloc
+
+    from fir_gym.video import watch
+
+    run = lambda n: watch("fir_gym/Orbit-v0", tmp_path / "o.gif", estimator="ekf",  # noqa: E731
+                          steps=n, every=1, progress=False)
+    run(5)                                                    # imports, caches
+    frame_bytes = 300 * 400 * 3
+    tracemalloc.start()
+    try:
+        peaks = []
+        for n in (50, 300):
+            tracemalloc.reset_peak()
+            assert run(n).frames == n + 1
+            peaks.append(tracemalloc.get_traced_memory()[1])
+    finally:
+        tracemalloc.stop()
+    assert peaks[1] - peaks[0] < 10 * frame_bytes, peaks
+
+
+def test_watch_shows_a_progress_bar_of_the_steps_unless_told_not_to(tmp_path, monkeypatch):
+    """A tqdm bar of the episode's steps (checked through a stand-in for tqdm, not the
+    terminal); none with progress=False."""
+    tqdm_auto = pytest.importorskip("tqdm.auto")
+    from fir_gym.video import watch
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total=None, **kwargs):
+            self.total, self.n, self.closed = total, 0, False
+            bars.append(self)
+
+        def update(self, n=1):
+            self.n += n
+
+        def close(self):
+            self.closed = True
+
+    monkeypatch.setattr(tqdm_auto, "tqdm", Bar)
+    watch("fir_gym/VanDerPol-v0", tmp_path / "v.gif", estimator="bpf-kf", steps=12)
+    assert [(b.total, b.n, b.closed) for b in bars] == [(12, 12, True)]
+    watch("fir_gym/VanDerPol-v0", tmp_path / "v.gif", estimator="bpf-kf", steps=12,
+          progress=False)
+    assert len(bars) == 1
+
+
+def test_watch_help_states_the_default_and_what_a_clip_costs(capsys):
+    with pytest.raises(SystemExit):
+        main(["watch", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for needle in ("real time", "20 s", "--no-progress", "takes about", "inset"):
+        assert needle in text, needle
