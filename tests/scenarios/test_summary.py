@@ -81,7 +81,14 @@ def test_every_reading_line_of_the_report_is_short(quick_report, tmp_path):
     """The readings are a legend, one a line: no "Readings:" paragraph runs on."""
     text = write_report(tmp_path, [quick_report(name) for name in PAPERS]).read_text()
     assert text.count("\nReadings:\n- ") >= 5
-    assert not any(line.startswith("Readings: ") for line in text.splitlines())
+    lines = text.splitlines()
+    assert not any(line.startswith("Readings: ") for line in lines)
+    legend, inside = [], False
+    for line in lines:
+        inside = line == "Readings:" or (inside and line.startswith("- "))
+        if inside and line.startswith("- "):
+            legend.append(line)
+    assert legend and max(len(line) for line in legend) <= 160
 
 
 def test_findings_rank_unreproduced_numbers_by_their_closest_reading_then_failed_claims():
