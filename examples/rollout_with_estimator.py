@@ -4,7 +4,7 @@
 
 Writes ``OUT/orbit_ekf.png`` (estimate ± 2σ against the truth, per state) and
 ``OUT/orbit_ekf.gif`` (the estimate drawn over the plant's frames; needs the ``video``
-extra: ``pip install "fir-gym[video]"``).
+extra: ``pip install ".[video]"``).
 """
 
 from __future__ import annotations

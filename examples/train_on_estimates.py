@@ -2,7 +2,7 @@
 
     python examples/train_on_estimates.py [--steps 2048] [--episodes 5] [--out examples-output]
 
-Needs the ``rl`` extra: ``pip install torch==2.13.0 && pip install "fir-gym[rl]"``. The
+Needs the ``rl`` extra: ``pip install torch==2.13.0 && pip install ".[rl]"``. The
 controller sees the KF's estimate (``observation_kind="kf"``); the classical baseline is
 the LQR of the plant's nominal model on the same estimate (``"lqg"``). The default budget
 is a demonstration, not a trained controller: ``fir-gym compare-controllers`` runs the

@@ -129,7 +129,7 @@ def _add_training_options(p: argparse.ArgumentParser) -> None:
 def _add_runner_options(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--backend", default="serial", choices=["serial", "joblib", "dask"],
                    help=f"where the {what} run (default: serial, this process; dask needs "
-                        'the cluster extra: pip install "fir-gym[cluster]")')
+                        'the cluster extra: pip install ".[cluster]")')
     p.add_argument("--jobs", type=positive_int, default=None,
                    help="worker processes for joblib/dask (default: the CPUs)")
     p.add_argument("--scheduler", default=None,
@@ -172,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_runner_options(p, "Monte Carlo runs")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
-    rl = 'Needs the rl extra: pip install torch==2.13.0 && pip install "fir-gym[rl]".'
+    rl = 'Needs the rl extra: pip install torch==2.13.0 && pip install ".[rl]".'
     p = command("train", "train a controller with stable-baselines3",
                 description="Train a controller with stable-baselines3 and evaluate it. " + rl)
     p.add_argument("--env", required=True,
@@ -268,7 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "MuJoCo PendulumSlider-v0 under software OpenGL, so the default "
                             "PendulumSlider-v0 GIF (251 frames) takes about 14 s of CPU and an "
                             "Orbit-v0 GIF (501 frames) about 5 s. Needs the video extra: "
-                            'pip install "fir-gym[video]".')
+                            'pip install ".[video]".')
     p.add_argument("--env", default=None,
                    help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
                         "the run's)")
@@ -305,7 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "Minari dataset: the observations the controller saw, and the true "
                             "state, measurement, estimate, covariance and active conditions "
                             "in each step's infos. Episode i uses seed SEED+i. Needs the "
-                            'dataset extra: pip install "fir-gym[dataset]".')
+                            'dataset extra: pip install ".[dataset]".')
     p.add_argument("--env", default=None,
                    help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
                         "the run's)")

@@ -9,16 +9,16 @@ what fixes it instead of ``No module named 'torch'``.
 
 from __future__ import annotations
 
-#: the command that installs each extra (PyTorch first for ``rl``: stable-baselines3
-#: would otherwise pull a CUDA build)
-INSTALL = {
-    "rl": 'pip install torch==2.13.0 && pip install "fir-gym[rl]"',
-    "cluster": 'pip install "fir-gym[cluster]"',
-    "video": 'pip install "fir-gym[video]"',
-    "bench": 'pip install "fir-gym[bench]"',
-    "docs": 'pip install "fir-gym[docs]"',
-    "dataset": 'pip install "fir-gym[dataset]"',
-}
+#: the command that installs each extra, from a checkout of fir-gym (it is not on a package
+#: index; PyTorch first for ``rl``: stable-baselines3 would otherwise pull a CUDA build)
+INSTALL = {extra: f'{command} (in the fir-gym checkout)' for extra, command in {
+    "rl": 'pip install torch==2.13.0 && pip install ".[rl]"',
+    "cluster": 'pip install ".[cluster]"',
+    "video": 'pip install ".[video]"',
+    "bench": 'pip install ".[bench]"',
+    "docs": 'pip install ".[docs]"',
+    "dataset": 'pip install ".[dataset]"',
+}.items()}
 
 #: top-level module -> (the package's name, the extra that installs it)
 MODULES = {

@@ -27,7 +27,7 @@ the estimator was fed. :func:`build_env_and_policy` mirrors it without rendering
 policy loader (:func:`fir_gym.video._trained_policy`) as it is.
 
 Minari, and h5py for its default HDF5 storage, come with the ``dataset`` extra:
-``pip install "fir-gym[dataset]"``.
+``pip install ".[dataset]"``.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ more where the clip would last longer than :data:`CLIP_SECONDS`. Frames go to th
 as they are drawn, so memory stays that of one frame: ``.gif`` through
 :class:`fir_gym._gif.GifStream` (Pillow, imageio's own dependency), ``.mp4`` through the
 ffmpeg binary of the ``imageio-ffmpeg`` wheel. Both come with the ``video`` extra:
-``pip install "fir-gym[video]"``.
+``pip install ".[video]"``.
 
 Making a clip costs one ``render()`` per frame — about 2 ms for the numpy drawings and
 30–50 ms for the MuJoCo pendulum under software OpenGL (``MUJOCO_GL=egl`` without a

@@ -46,13 +46,13 @@ def run_blocked(blocked, argv):
 
 @pytest.mark.parametrize(("blocked", "argv", "install"), [
     (["stable_baselines3"], ["train", "--env", "fir_gym/Orbit-v0", "--out", "RUN"],
-     'pip install torch==2.13.0 && pip install "fir-gym[rl]"'),
+     'pip install torch==2.13.0 && pip install ".[rl]"'),
     (["stable_baselines3"], ["evaluate", "--env", "fir_gym/Orbit-v0", "--kind", "lqg"],
-     'pip install "fir-gym[rl]"'),
+     'pip install ".[rl]"'),
     (["dask", "distributed"], ["reproduce", "--backend", "dask", "--quick"],
-     'pip install "fir-gym[cluster]"'),
+     'pip install ".[cluster]"'),
     (["imageio"], ["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf", "--out",
-                   "x.gif"], 'pip install "fir-gym[video]"'),
+                   "x.gif"], 'pip install ".[video]"'),
 ])
 def test_a_missing_extra_names_the_pip_install_that_fixes_it(tmp_path, blocked, argv, install):
     argv = [str(tmp_path / a) if a in ("RUN", "x.gif") else a for a in argv]

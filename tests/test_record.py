@@ -172,7 +172,7 @@ def test_missing_minari_is_one_line_with_the_install_command():
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    assert 'pip install "fir-gym[dataset]"' in lines[0] and "Minari" in lines[0]
+    assert 'pip install ".[dataset]"' in lines[0] and "Minari" in lines[0]
 
 
 @pytest.fixture(scope="module")

@@ -145,10 +145,10 @@ def test_watch_mistakes_print_one_line_and_exit_2(tmp_path, capsys, runs):
 def test_a_missing_extra_names_the_install_that_fixes_it(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)       # as if not installed
     one_line_error(capsys, ["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf",
-                            "--out", str(tmp_path / "x.mp4")], 'pip install "fir-gym[video]"')
+                            "--out", str(tmp_path / "x.mp4")], 'pip install ".[video]"')
     monkeypatch.setitem(sys.modules, "imageio", None)
     one_line_error(capsys, ["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf",
-                            "--out", str(tmp_path / "x.gif")], 'pip install "fir-gym[video]"')
+                            "--out", str(tmp_path / "x.gif")], 'pip install ".[video]"')
 
 
 def test_watch_lqg_plays_the_classical_controller_evaluate_plays(tmp_path, capsys):

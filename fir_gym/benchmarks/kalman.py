@@ -3,7 +3,7 @@
 ``python -m fir_gym.benchmarks.kalman`` prints µs per filter step (predict +
 update) for KF, EKF and UKF, single (one system) and batched (B = 1024, µs per
 system-step), on a 2-state/1-output linear model and a 4-state/2-output
-nonlinear model, and — when filterpy is importable (``pip install fir-gym[bench]``)
+nonlinear model, and — when filterpy is importable (``pip install ".[bench]"``)
 — filterpy's ``KalmanFilter``/``ExtendedKalmanFilter``/``UnscentedKalmanFilter`` on
 the same models with the same sigma-point parameters, and the ratios.
 
