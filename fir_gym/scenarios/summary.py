@@ -145,8 +145,11 @@ def findings(report: Report, n: int = FINDINGS_PER_PAPER) -> list[Finding]:
 def summary_markdown(reports: Sequence[Report]) -> list[str]:
     """REPORT.md's summary: the counts table, then each paper's findings, then the rule."""
     parts = ["## Summary", "",
-             "Rows per verdict (the vocabulary is defined below), counted from the tables of "
-             "each section.", "", counts_table(reports), ""]
+             "Rows per verdict (the vocabulary is defined below), counted from each "
+             "section's verdict tables, those headed `quantity | paper | ours | reading | "
+             "verdict`: one row per number or claim and reading. The detail tables below "
+             "them, which repeat claims under further readings, are not counted.", "",
+             counts_table(reports), ""]
     for report in reports:
         found = findings(report)
         if found:
@@ -160,5 +163,5 @@ def summary_markdown(reports: Sequence[Report]) -> list[str]:
 
 def summary_text(reports: Sequence[Report]) -> str:
     """The terminal's short summary: the verdict counts per paper, as a plain table."""
-    return "Verdicts per paper (rows of each section's tables)\n\n" + counts_table(
+    return "Verdicts per paper (rows of each section's verdict tables)\n\n" + counts_table(
         reports, markdown=False)
