@@ -89,7 +89,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         if out:
             path = write_report(out, reports, episodes_table=(headers, rows))
     if out:          # the report is in the file: the terminal gets its summary and path
-        print(summary_text(reports))
+        print(summary_text(reports, markdown=args.markdown))
         print(f"\nwrote {path}")
     else:
         print("Verdicts\n\n" + vocabulary(markdown=False) + "\n")
@@ -97,7 +97,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         print(format_table(headers, rows, markdown=args.markdown))
         for report in reports:
             print("\n" + report.to_text(markdown=args.markdown))
-        print("\n" + summary_text(reports))
+        print("\n" + summary_text(reports, markdown=args.markdown))
     print(watch.line("fir-gym reproduce"), file=sys.stderr)
     return 0
 

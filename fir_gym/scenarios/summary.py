@@ -161,7 +161,7 @@ def summary_markdown(reports: Sequence[Report]) -> list[str]:
     return parts
 
 
-def summary_text(reports: Sequence[Report]) -> str:
-    """The terminal's short summary: the verdict counts per paper, as a plain table."""
+def summary_text(reports: Sequence[Report], *, markdown: bool = False) -> str:
+    """The terminal's short summary: the verdict counts per paper (a plain or Markdown table)."""
     return "Verdicts per paper (rows of each section's verdict tables)\n\n" + counts_table(
-        reports, markdown=False)
+        reports, markdown=markdown)
