@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.transforms import offset_copy
 from numpy.typing import ArrayLike
 
 from .report import Report
@@ -28,6 +29,9 @@ FIGURE_DIR = "figures"
 COINCIDE_RTOL = 1e-2
 #: markers for curves drawn one over another: each smaller than the one before, so all show
 MARKERS = ("o", "s", "^", "d", "v", "P", "X", "*")
+#: how far under its axes a legend ``below`` them starts (points: the tick labels and the
+#: x label take about 30 at the default font size, whatever the axes' height)
+BELOW_POINTS = 40.0
 
 
 def new_figure(rows: int = 1, cols: int = 1, *, width: float = 8.0, height: float = 3.0,
@@ -59,9 +63,10 @@ def save(report: Report, out_dir: str | Path, name: str, fig: Figure, caption: s
 def legend_outside(ax: Any, *, below: bool = False, ncol: int = 1, fontsize: float = 7) -> Any:
     """``ax``'s legend outside its data: to the right of the axes, or ``below`` them (for
     panels side by side) in ``ncol`` columns."""
-    if below:
-        return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, -0.16),
-                         ncol=ncol, frameon=False)
+    if below:    # anchored a fixed distance under the axes, clear of the ticks and x label
+        under = offset_copy(ax.transAxes, fig=ax.figure, y=-BELOW_POINTS, units="points")
+        return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                         bbox_transform=under, ncol=ncol, frameon=False)
     return ax.legend(fontsize=fontsize, loc="upper left", bbox_to_anchor=(1.01, 1.0),
                      borderaxespad=0.0, frameon=False)
 

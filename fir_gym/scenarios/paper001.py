@@ -350,9 +350,12 @@ def plot(report: Report, out_dir: str | Path) -> None:
                        label=coincidence_note(name, same))
         paper = [float(v) for v in PAPER_TABLE1[key]]
         a.semilogy(finite, paper[:-1], "kx", ms=9, label="paper, Table 1")
-        a.axhline(paper[-1], color="k", ls="--", lw=0.8, label="paper, Kalman")
-        a.axhline(kal[ours], color="C0", ls="--", lw=0.8, label="ours, Kalman")
-        a.axhline(kal[exact], color="C1", ls=":", lw=0.8, label="exact, Kalman")
+        levels = {"paper, Kalman": paper[-1], "ours, Kalman": kal[ours],
+                  "exact, Kalman": kal[exact]}
+        same = coincident({name: [value] for name, value in levels.items()})
+        for (name, value), colour, ls in zip(levels.items(), ("k", "C0", "C1"),
+                                             ("--", "--", ":"), strict=True):
+            a.axhline(value, color=colour, ls=ls, lw=0.8, label=coincidence_note(name, same))
         a.set_xlabel("FIR horizon T (s)")
         a.set_ylabel(f"{label.split()[0]}: increase of the error\ncovariance trace (state units²)")
         a.set_title(f"Paper 001: {label}", fontsize=9)

@@ -99,10 +99,14 @@ def test_every_figure_the_report_writes_has_labelled_axes_and_legends_off_the_da
         overlaps = []
         for ax in fig.get_axes():
             legend = ax.get_legend()
-            if legend is not None:
-                box, panel = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
-                width = min(box.x1, panel.x1) - max(box.x0, panel.x0)
-                height = min(box.y1, panel.y1) - max(box.y0, panel.y0)
+            if legend is None:
+                continue
+            box = legend.get_window_extent(renderer)
+            # neither the panel's data area nor its x label
+            for other in (ax.get_window_extent(renderer),
+                          ax.xaxis.label.get_window_extent(renderer)):
+                width = min(box.x1, other.x1) - max(box.x0, other.x0)
+                height = min(box.y1, other.y1) - max(box.y0, other.y0)
                 if width > 1 and height > 1:
                     overlaps.append(ax.get_title())
         inspected.append((Path(path).name, unlabelled_axes(fig), overlaps))
