@@ -58,7 +58,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         from .scenarios import SCENARIOS, episodes
         from .scenarios.figures import save_figures, with_figures
         from .scenarios.plan import execute
-        from .scenarios.report import vocabulary, write_report
+        from .scenarios.report import vocabulary
+        from .scenarios.report_file import write_report
         from .scenarios.runner import Runner
         from .scenarios.summary import summary_text
 

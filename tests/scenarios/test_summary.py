@@ -7,7 +7,8 @@ from collections import Counter
 import pytest
 
 from fir_gym.scenarios.prose import Printed
-from fir_gym.scenarios.report import Report, claim, reproduced, write_report
+from fir_gym.scenarios.report import Report, claim, reproduced
+from fir_gym.scenarios.report_file import write_report
 from fir_gym.scenarios.summary import (
     COLUMNS,
     FINDINGS_PER_PAPER,
