@@ -233,6 +233,7 @@ def _runner(args: argparse.Namespace) -> Any:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from .training import compare_controllers, plot_learning_curves
+    from .training.curves import kinds_with_curves
 
     kinds = [k.strip() for k in args.observations.split(",") if k.strip()]
     seeds = list(range(args.seeds))
@@ -259,6 +260,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     runs = {k: [Path(args.out, f"{k}-seed{s}") for s in seeds] for k in kinds}
     plot = plot_learning_curves(runs, Path(args.out, "learning_curves.png"), title=args.env)
     print(f"wrote {Path(args.out, 'comparison.md')}" + (f" and {plot}" if plot else ""))
+    if plot is None and any(runs.values()) and not kinds_with_curves(runs):
+        print("no learning_curves.png: no training episode finished in any run (give --steps "
+              "more than an episode's length times --n-envs)")
     return 0
 
 

@@ -17,8 +17,9 @@ __all__ = ["learning_curve", "plot_learning_curves"]
 
 def plot_learning_curves(runs: Mapping[str, Sequence[str | Path]], path: str | Path,
                          title: str = "") -> Path | None:
-    """Save one learning curve per kind (mean over its runs, ± one std); None without
-    matplotlib.
+    """Save one learning curve per kind (mean over its runs, ± one std); ``None`` — and no
+    file — without matplotlib or when no run has a finished training episode (an empty
+    figure would say nothing: :func:`kinds_with_curves` tells the caller why).
 
     ``runs`` maps a label (a kind) to its run folders; kinds without a finished training
     episode are named on the figure. Drawn by :func:`fir_gym.plotting.plot_learning_curves`
@@ -32,6 +33,8 @@ def plot_learning_curves(runs: Mapping[str, Sequence[str | Path]], path: str | P
         return None
     from fir_gym.plotting import plot_learning_curves as draw
 
+    if not kinds_with_curves(runs):
+        return None
     fig = Figure(figsize=(7, 4))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
@@ -41,3 +44,11 @@ def plot_learning_curves(runs: Mapping[str, Sequence[str | Path]], path: str | P
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     return Path(path)
+
+
+def kinds_with_curves(runs: Mapping[str, Sequence[str | Path]]) -> list[str]:
+    """The labels of ``runs`` with at least one finished training episode (a curve to draw)."""
+    from fir_gym.plotting.monitor import learning_curve
+
+    return [label for label, folders in runs.items()
+            if any(len(learning_curve(folder)[0]) for folder in folders)]
