@@ -108,14 +108,17 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     report = {"quick": quick, "seconds": seconds, "reused": reused, "jobs": len(results),
               "tables": tables, "answers": answers(tables), "results": results}
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     figures = out / "figures"
     figures.mkdir(exist_ok=True)
+    curves: dict[str, bool] = {}
     for env_id in tables:
         folder = out / env_id.split("/")[-1]
         runs = {k: sorted(folder.glob(f"{k}-seed*")) for k in KINDS if k != "lqg"}
-        plot_learning_curves(runs, figures / f"{env_id.split('/')[-1]}_learning_curves.png",
-                             title=env_id)
+        written = plot_learning_curves(
+            runs, figures / f"{env_id.split('/')[-1]}_learning_curves.png", title=env_id)
+        curves[env_id] = written is not None
+    report["learning_curves"] = curves
+    (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "BENCHMARK.md").write_text(markdown(report) + "\n")
     return report
 
@@ -260,8 +263,11 @@ def markdown(report: dict[str, Any]) -> str:
             lines += ["", f"Intervals: 95 % bootstrap over the seeds and the {episodes} "
                           "evaluation episodes every kind shares (a one-seed kind: over its "
                           "episodes)."]
-        lines += ["", f"![learning curves](figures/{env_id.split('/')[-1]}_learning_curves.png)",
-                  ""]
+        if report.get("learning_curves", {}).get(env_id, True):
+            lines += ["", f"![learning curves](figures/{env_id.split('/')[-1]}"
+                          "_learning_curves.png)", ""]
+        else:
+            lines += ["", "No learning curves: no training episode finished in any run.", ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report["answers"]]
     wall = f"Wall time: {report['seconds'] / 60:.1f} min"
     if report.get("reused"):

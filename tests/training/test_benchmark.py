@@ -48,8 +48,10 @@ def test_quick_benchmark_runs_every_plant_and_kind(tmp_path, capsys):
     assert len(report["answers"]) == len(PLANTS)
     text = (tmp_path / "BENCHMARK.md").read_text()
     assert "IQM return [95% CI]" in text and "## Answers" in text
-    for env_id in PLANTS:
-        assert (tmp_path / "figures" / f"{env_id.split('/')[-1]}_learning_curves.png").is_file()
+    for env_id in PLANTS:                  # a figure exactly where a training episode finished
+        figure = tmp_path / "figures" / f"{env_id.split('/')[-1]}_learning_curves.png"
+        assert figure.is_file() == report["learning_curves"][env_id]
+        assert (figure.name in text) == figure.is_file()
     assert "Answers" in capsys.readouterr().out
 
 
