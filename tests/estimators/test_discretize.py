@@ -77,7 +77,8 @@ def test_bad_arguments(kwargs, match):
        dt=st.floats(0.01, 1.0))
 def test_integrated_noise_of_a_scalar_ornstein_uhlenbeck(a, g, q, dt):
     """dx = a x dt + g dw: Var x(dt) = g² q (e^{2a dt} − 1) / (2a), g² q dt at a = 0."""
-    expected = g * g * q * (np.expm1(2 * a * dt) / (2 * a) if a != 0 else dt)
+    x = 2 * a * dt                 # (e^x − 1)/x, 1 at x = 0: also where 2 a dt underflows
+    expected = g * g * q * dt * (np.expm1(x) / x if x != 0 else 1.0)
     np.testing.assert_allclose(integrated_noise([[a]], dt, G=[[g]], Q=q), [[expected]],
                                rtol=1e-10)
 
