@@ -19,7 +19,7 @@ from . import __version__
 
 #: what ``reproduce --paper`` accepts
 PAPERS = ("000", "001", "002", "003", "004", "sweeps")
-#: what ``watch --policy`` accepts besides a run folder (fir_gym.video.POLICIES)
+#: what ``watch --policy`` accepts besides a run folder (fir_gym.episode_policy.POLICIES)
 WATCH_POLICIES = ("zero", "lqg")
 
 
@@ -269,15 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "PendulumSlider-v0 GIF (251 frames) takes about 14 s of CPU and an "
                             "Orbit-v0 GIF (501 frames) about 5 s. Needs the video extra: "
                             'pip install ".[video]".')
-    p.add_argument("--env", default=None,
-                   help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
-                        "the run's)")
-    p.add_argument("--estimator", default=None,
-                   help="the estimator drawn, a registry name such as ekf (default with a run "
-                        "that observes an estimator: that one)")
-    p.add_argument("--policy", default="zero", metavar="|".join((*WATCH_POLICIES, "RUN")),
-                   help="'zero' (no action), 'lqg' (the LQR of the plant's nominal model on "
-                        "the estimate) or a run folder written by `fir-gym train`")
+    _add_episode_source(p, "the estimator drawn")
     # --steps and --every are checked by fir_gym.video.watch (the same message in Python)
     p.add_argument("--steps", type=int, default=None,
                    help="at most this many steps (default: the whole episode)")
@@ -289,12 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="draw every N-th step's frame (default: real time, "
                         "round(1 / (fps * dt)), raised so the clip lasts at most 20 s: "
                         "PendulumSlider-v0 20 for a GIF, 10 for an MP4; Orbit-v0 2)")
-    p.add_argument("--estimator-kwargs", type=json_dict, metavar="JSON", default={},
-                   help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
-                        "(default: none)")
-    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
-                   help="JSON object of gym.make options, e.g. '{\"nominal\": {\"mu\": 19.9}}' "
-                        "(default: none)")
+    _add_episode_options(p, '{"nominal": {"mu": 19.9}}')
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bar (default: a bar of the steps on stderr)")
     p.add_argument("--out", required=True,
@@ -306,25 +293,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "state, measurement, estimate, covariance and active conditions "
                             "in each step's infos. Episode i uses seed SEED+i. Needs the "
                             'dataset extra: pip install ".[dataset]".')
-    p.add_argument("--env", default=None,
-                   help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
-                        "the run's)")
-    p.add_argument("--estimator", default=None,
-                   help="the estimator in the loop, a registry name such as ekf (default "
-                        "with a run that observes an estimator: that one)")
-    p.add_argument("--policy", default="zero", metavar="|".join((*WATCH_POLICIES, "RUN")),
-                   help="'zero' (no action), 'lqg' (the LQR of the plant's nominal model on "
-                        "the estimate) or a run folder written by `fir-gym train`")
+    _add_episode_source(p, "the estimator in the loop")
     p.add_argument("--episodes", type=positive_int, default=10, help="how many episodes")
     p.add_argument("--seed", type=int, default=0, help="the first episode's seed")
     p.add_argument("--steps", type=positive_int, default=None,
                    help="at most this many steps per episode (default: the whole episode)")
-    p.add_argument("--estimator-kwargs", type=json_dict, metavar="JSON", default={},
-                   help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
-                        "(default: none)")
-    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
-                   help="JSON object of gym.make options, e.g. '{\"sensor_faults\": "
-                        "{\"dropout\": 0.1}}' (default: none)")
+    _add_episode_options(p, '{"sensor_faults": {"dropout": 0.1}}')
     p.add_argument("--dataset-id", default=None,
                    help="Minari's namespace/name-vN (default: "
                         "fir_gym/<plant>-<estimator>-<policy>-v0)")
@@ -339,3 +313,25 @@ def build_parser() -> argparse.ArgumentParser:
                 "run (see fir-gym speed --help)") if name == "speed" else "the old name of speed"
         sub.add_parser(name, help=what, add_help=False)
     return parser
+
+
+def _add_episode_source(p: argparse.ArgumentParser, estimator_role: str) -> None:
+    """``--env``, ``--estimator`` and ``--policy`` of a scripted episode (watch, record)."""
+    p.add_argument("--env", default=None,
+                   help="environment id, e.g. fir_gym/Orbit-v0 (default with a run folder: "
+                        "the run's)")
+    p.add_argument("--estimator", default=None,
+                   help=f"{estimator_role}, a registry name such as ekf (default with a run "
+                        "that observes an estimator: that one)")
+    p.add_argument("--policy", default="zero", metavar="|".join((*WATCH_POLICIES, "RUN")),
+                   help="'zero' (no action), 'lqg' (the LQR of the plant's nominal model on "
+                        "the estimate) or a run folder written by `fir-gym train`")
+
+
+def _add_episode_options(p: argparse.ArgumentParser, env_example: str) -> None:
+    """``--estimator-kwargs`` and ``--env-kwargs`` (JSON objects) of a scripted episode."""
+    p.add_argument("--estimator-kwargs", type=json_dict, metavar="JSON", default={},
+                   help="JSON object of estimator options, e.g. '{\"horizon\": 20}' "
+                        "(default: none)")
+    p.add_argument("--env-kwargs", type=json_dict, metavar="JSON", default={},
+                   help=f"JSON object of gym.make options, e.g. '{env_example}' (default: none)")

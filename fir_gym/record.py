@@ -24,7 +24,7 @@ Why not :func:`fir_gym.video._env_and_policy`: it builds the env with
 ``render_mode="rgb_array"`` (the video draws frames) and does not expose the measurement
 the estimator was fed. :func:`build_env_and_policy` mirrors it without rendering, with
 :class:`MeasurementInInfo` between the plant and the estimator, and reuses its trained
-policy loader (:func:`fir_gym.video._trained_policy`) as it is.
+policy loader (:mod:`fir_gym.episode_policy`) as it is.
 
 Minari, and h5py for its default HDF5 storage, come with the ``dataset`` extra:
 ``pip install ".[dataset]"``.
@@ -32,7 +32,6 @@ Minari, and h5py for its default HDF5 storage, come with the ``dataset`` extra:
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import warnings
@@ -47,7 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._extras import INSTALL, MissingExtra, install_hint
-from .video import POLICIES, Policy, _trained_policy
+from .episode_policy import POLICIES, Policy, classical_policy, run_config, trained_policy
 
 #: the namespace of the datasets :func:`record` names itself
 NAMESPACE = "fir_gym"
@@ -298,13 +297,7 @@ def build_env_and_policy(env_id: str | None, estimator: str | None, policy: str 
     meta = {"env_id": env_id, "env_kwargs": env_kwargs, "estimator": estimator,
             "estimator_kwargs": estimator_kwargs, "policy": str(policy),
             "observation": observation}
-    if str(policy) == "lqg":
-        from .controllers import LQGController
-
-        controller = LQGController(env)
-        return env, lambda obs: np.asarray(controller.predict(obs)[0]), meta
-    zeros: NDArray[Any] = np.zeros(env.action_space.shape or (), dtype=np.float32)
-    return env, lambda obs: zeros, meta
+    return env, classical_policy(env, str(policy)), meta
 
 
 def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
@@ -312,18 +305,11 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
                         ) -> tuple[gym.Env, Policy, dict[str, Any]]:
     """A trained run's controller on the env it was trained on, the measurement in
     ``info`` (:func:`fir_gym.video._run_env_and_policy` without rendering)."""
-    from .training import RunConfig
     from .training.kinds import recipe
     from .wrappers import ShadowEstimator, wrap_observation
     from .wrappers.sensor_faults import with_known_delay
 
-    if not (run / "run.json").is_file():
-        raise ValueError(f"policy must be one of {', '.join(POLICIES)} or a run folder of "
-                         f"`fir-gym train` (with run.json); {str(run)!r} is neither")
-    config = RunConfig(**json.loads((run / "run.json").read_text()))
-    if env_id is not None and env_id != config.env_id:
-        raise ValueError(f"env is {env_id!r} but the run {str(run)!r} was trained on "
-                         f"{config.env_id!r} (leave env out to use the run's)")
+    config = run_config(run, env_id)
     kind = config.observation_kind
     kwargs = {**config.env_kwargs, **env_kwargs}
     made = recipe(kind, config.kind_kwargs, config.observation)
@@ -357,7 +343,7 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
     meta = {"env_id": config.env_id, "env_kwargs": kwargs, "estimator": estimator,
             "estimator_kwargs": estimator_kwargs, "policy": str(run),
             "observation": made.observation, "run_kind": kind, "run_algo": config.algo}
-    return env, _trained_policy(run, config.algo, env), meta
+    return env, trained_policy(run, config.algo, env), meta
 
 
 # ---------------------------------------------------------------------- Minari

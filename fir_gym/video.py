@@ -33,7 +33,6 @@ PendulumSlider-v0 GIF (5 000 steps, 251 frames) takes about 14 s of CPU, an Orbi
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -45,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._extras import INSTALL, MissingExtra
+from .episode_policy import POLICIES, Policy, classical_policy, run_config, trained_policy
 from .wrappers import ShadowEstimator, wrap_observation
 
 #: the file types :func:`watch` writes
@@ -53,11 +53,7 @@ VIDEO_SUFFIXES = (".gif", ".mp4")
 CLIP_SECONDS = 20.0
 #: frames per second: the fastest a GIF plays (browsers show a delay under 20 ms as 100 ms)
 GIF_MAX_FPS = 50.0
-#: what ``--policy`` accepts besides a run folder
-POLICIES = ("zero", "lqg")
 EXTRA = INSTALL["video"]
-
-Policy = Callable[[Any], NDArray[Any]]
 
 
 @dataclass(frozen=True)
@@ -217,13 +213,7 @@ def _env_and_policy(env_id: str | None, estimator: str | None, policy: str | Pat
             raise ValueError("estimator is needed: the video draws its estimate")
         env = gym.make(env_id, render_mode="rgb_array", estimator=estimator,
                        estimator_kwargs=estimator_kwargs, **env_kwargs)
-        if str(policy) == "lqg":
-            from .controllers import LQGController
-
-            controller = LQGController(env)
-            return env, lambda obs: np.asarray(controller.predict(obs)[0])
-        zeros: NDArray[Any] = np.zeros(env.action_space.shape or (), dtype=np.float32)
-        return env, lambda obs: zeros
+        return env, classical_policy(env, str(policy))
     return _run_env_and_policy(Path(policy), env_id, estimator, estimator_kwargs, env_kwargs)
 
 
@@ -231,15 +221,9 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
                         estimator_kwargs: dict[str, Any], env_kwargs: dict[str, Any]
                         ) -> tuple[gym.Env, Policy]:
     """A trained run's controller on the env it was trained on, rendering its frames."""
-    from .training import RunConfig, make_env
+    from .training import make_env
 
-    if not (run / "run.json").is_file():
-        raise ValueError(f"policy must be one of {', '.join(POLICIES)} or a run folder of "
-                         f"`fir-gym train` (with run.json); {str(run)!r} is neither")
-    config = RunConfig(**json.loads((run / "run.json").read_text()))
-    if env_id is not None and env_id != config.env_id:
-        raise ValueError(f"env is {env_id!r} but the run {str(run)!r} was trained on "
-                         f"{config.env_id!r} (leave env out to use the run's)")
+    config = run_config(run, env_id)
     kind = config.observation_kind
     kwargs = {**config.env_kwargs, **env_kwargs, "render_mode": "rgb_array"}
     if kind in ("true", "measurement"):
@@ -256,26 +240,7 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
             raise ValueError("estimator_kwargs cannot change the estimator the run was "
                              "trained with")
         env = make_env(dataclasses.replace(config, env_kwargs=kwargs))
-    return env, _trained_policy(run, config.algo, env)
-
-
-def _trained_policy(run: Path, algo: str, env: gym.Env) -> Policy:
-    """The run's deterministic policy, its observations normalised as in training."""
-    try:
-        from stable_baselines3 import PPO, SAC
-        from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-    except ModuleNotFoundError as err:
-        raise MissingExtra(f"a run's policy needs stable-baselines3 ({err.name} is missing): "
-                           f"{INSTALL['rl']}") from None
-    algorithm: Any = {"ppo": PPO, "sac": SAC}[algo]
-    model = algorithm.load(run / "model.zip", device="cpu")
-    stats = VecNormalize.load(str(run / "vecnormalize.pkl"), DummyVecEnv([lambda: env]))
-
-    def act(obs: Any) -> NDArray[Any]:
-        action, _ = model.predict(stats.normalize_obs(obs), deterministic=True)
-        return np.asarray(action)
-
-    return act
+    return env, trained_policy(run, config.algo, env)
 
 
 # ---------------------------------------------------------------------- writers
