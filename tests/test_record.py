@@ -175,19 +175,10 @@ def test_missing_minari_is_one_line_with_the_install_command():
     assert 'pip install ".[dataset]"' in lines[0] and "Minari" in lines[0]
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    """Two tiny trained runs on CarrierMotion-v0: one sees a KF's estimate, one the truth."""
-    pytest.importorskip("stable_baselines3")
-    from fir_gym.training import RunConfig, train
-
-    root = tmp_path_factory.mktemp("runs")
-    out = {}
-    for kind in ("kf", "true"):
-        config = RunConfig(env_id="fir_gym/CarrierMotion-v0", observation_kind=kind,
-                           steps=256, seed=0, n_envs=1, env_kwargs={"max_episode_steps": 30})
-        out[kind] = train(config, root / kind)
-    return out
+@pytest.fixture
+def runs(tiny_runs):
+    """The session's two tiny trained runs (tests/conftest.py)."""
+    return tiny_runs
 
 
 @pytest.mark.parametrize(("kind", "estimator"), [("kf", None), ("true", "kf")])

@@ -69,19 +69,10 @@ def test_watch_stops_at_the_end_of_the_episode(tmp_path):
     assert len(imageio.mimread(out)) == 7
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    """Two tiny trained runs on CarrierMotion-v0: one sees the true state, one a KF's."""
-    pytest.importorskip("stable_baselines3")
-    from fir_gym.training import RunConfig, train
-
-    root = tmp_path_factory.mktemp("runs")
-    out = {}
-    for kind in ("true", "kf"):
-        config = RunConfig(env_id="fir_gym/CarrierMotion-v0", observation_kind=kind,
-                           steps=256, seed=0, n_envs=1, env_kwargs={"max_episode_steps": 30})
-        out[kind] = train(config, root / kind)
-    return out
+@pytest.fixture
+def runs(tiny_runs):
+    """The session's two tiny trained runs (tests/conftest.py)."""
+    return tiny_runs
 
 
 @pytest.mark.parametrize(("kind", "estimator"), [("true", ["--estimator", "kf"]),
