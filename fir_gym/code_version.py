@@ -23,8 +23,8 @@ from pathlib import Path
 SUFFIXES = (".py", ".yml", ".yaml", ".xml")
 #: files and folders of ``fir_gym`` that only present results or run other commands
 PRESENTATION = ("_cli_parser.py", "_commands.py", "_extras.py", "cli.py", "tables.py",
-                "video.py", "episode_policy.py", "benchmarks", "plotting", "scenarios",
-                "robustness/benchmark.py",
+                "video.py", "episode_policy.py", "machine.py", "benchmarks", "plotting",
+                "scenarios", "robustness/benchmark.py",
                 "robustness/report.py", "robustness/tables.py", "robustness/answers.py",
                 "robustness/readme.py", "robustness/formatting.py",
                 "training/benchmark.py", "training/curves.py")

@@ -39,6 +39,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from fir_gym.machine import cpu_model
+
 RUNS = {"cold": [], "warm": [], "quick": ["--quick"]}
 
 
@@ -62,17 +64,6 @@ def reference_workload(repeats: int = 3) -> float:
         best = min(best, time.process_time() - start)
         assert np.isfinite(m).all() and total > 0
     return best
-
-
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``, else the platform's processor string)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def fir_gym_command() -> list[str]:

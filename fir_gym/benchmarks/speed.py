@@ -56,6 +56,7 @@ import numpy as np
 from fir_gym.estimators import compiled
 
 from .. import ENV_IDS, VECTOR_ENV_IDS
+from ..machine import cpu_model
 from ..tables import format_table
 from . import SECTIONS, _floors, speed_parser
 from . import estimators as est_bench
@@ -224,7 +225,7 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
         ) -> dict[str, Any]:
     """Run the chosen sections; returns every figure (what ``--json`` writes)."""
     results: dict[str, Any] = {"machine": {
-        "python": platform.python_version(), "numpy": np.__version__,
+        "cpu": cpu_model(), "python": platform.python_version(), "numpy": np.__version__,
         "platform": platform.platform(), "cpus": os.cpu_count(),
         "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
         "compiled_kernels": (f"numba {compiled.numba.__version__}" if compiled.ENABLED
@@ -241,7 +242,9 @@ def run(sections: Sequence[str] = SECTIONS, quick: bool = False, echo: bool = Tr
     results["seconds"] = time.perf_counter() - start
     if echo:
         print_targets(results["targets"])
-        print(f"\n({results['seconds']:.0f} s; compiled kernels: "
+        machine = results["machine"]
+        print(f"\n({results['seconds']:.0f} s on {machine['cpu']}, {machine['cpus']} CPUs; "
+              "compiled kernels: "
               f"{results['machine']['compiled_kernels']}; load average at start "
               f"{results['machine']['load_average']})")
     return results

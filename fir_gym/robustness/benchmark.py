@@ -22,6 +22,7 @@ from typing import Any
 
 from fir_gym.conditions import get_condition
 
+from ..machine import cores, cpu_model, load_average
 from .lqg_grid import LQGTask, run_lqg_task
 from .plan import (
     EPISODES,
@@ -142,7 +143,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     if quick and plants is None:
         chosen_plants = [p for p in QUICK.plants if p in chosen_plants]
     runner = runner or SERIAL
-    load_start = _load()
+    load_start = load_average()
     start = time.perf_counter()
     lqg = lqg_tasks(chosen_plants, chosen_conditions, quick=quick)
     lqg_results = runner.map(run_task, lqg, desc="LQG grid")
@@ -160,10 +161,10 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     tables = tables_of(records)
     report: dict[str, Any] = {
         "quick": quick, "code_version": code_version(),
-        "machine": {"cpu": _cpu_model(), "cores": _cores(), "python": platform.python_version(),
+        "machine": {"cpu": cpu_model(), "cores": cores(), "python": platform.python_version(),
                     "backend": getattr(runner, "backend", "serial"),
                     "jobs": getattr(runner, "jobs", None), "load_start": load_start,
-                    "load_end": _load()},
+                    "load_end": load_average()},
         "lqg_seconds": lqg_seconds, "lqg_tasks": len(lqg_results),
         "learned_seconds": learned_seconds, "learned_tasks": len(learned_results),
         "learned_reused": reused,
@@ -182,30 +183,3 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     figures = save_figures(report, out / "figures")
     (out / "REPORT.md").write_text(markdown(report, figures) + "\n")
     return report
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def _load() -> list[float] | None:
-    """The 1, 5 and 15-minute load averages (None where the system has none)."""
-    import os
-
-    try:
-        return [round(v, 2) for v in os.getloadavg()]
-    except (AttributeError, OSError):
-        return None
-
-
-def _cores() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else \
-        (os.cpu_count() or 1)
