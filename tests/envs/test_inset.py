@@ -10,30 +10,22 @@ measures them). A region that shows on the frame leaves today's drawing as it wa
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from frames import ESTIMATE, MEASUREMENT, centroid, pixels_of, plant_at, truth_centroids
+from frames import (
+    ESTIMATE,
+    MEASUREMENT,
+    centroid,
+    pixels_of,
+    plant_at,
+    plant_in_state,
+    truth_centroids,
+)
 
 import fir_gym
 from fir_gym.envs import _inset
 from fir_gym.envs._draw import GREY
 from fir_gym.envs._inset import MARGIN, inset_size, magnification
-
-STATES = {
-    "fir_gym/Orbit-v0": (8.3, 1.0),
-    "fir_gym/UncertainOscillator-v0": (0.8, 0.0, 0.5),
-    "fir_gym/CarrierMotion-v0": (0.2, 0.0),
-    "fir_gym/VanDerPol-v0": (1.2, -0.7),
-    "fir_gym/PendulumSlider-v0": (0.05, 0.0, 0.6, 0.0),
-}
-
-
-def plant(env_id):
-    p = gym.make(env_id, render_mode="rgb_array").unwrapped
-    p.reset(seed=0, options={"state": STATES[env_id]})
-    p.render()
-    return p
 
 
 def pixels_per_unit(p, i):
@@ -89,7 +81,7 @@ def test_an_orbit_bar_under_a_pixel_is_magnified_and_doubles_with_sigma():
     """Orbit-v0 draws the radius only: its 2σ region is a vertical bar. With σ_r so small
     that the bar is 0.01 px on the frame, the inset draws it magnified; 4P draws it twice
     as long (within a pixel or two), at a power-of-ten magnification."""
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     frame = p.render()
     per_unit = abs(pixels_per_unit(p, 0)[1])                  # rows per unit of r
     sigma_r = 0.005 / per_unit                                # 2σ = 0.01 px on the frame
@@ -108,7 +100,7 @@ def test_an_orbit_bar_under_a_pixel_is_magnified_and_doubles_with_sigma():
 def test_a_phase_plane_ellipse_doubles_along_both_axes():
     """VanDerPol-v0's region is an ellipse; in the inset it is {v : vᵀ (m²S)⁻¹ v = 4}, S the
     covariance carried to pixels by the drawing's measured scale, and 4P doubles both axes."""
-    p = plant("fir_gym/VanDerPol-v0")
+    p = plant_in_state("fir_gym/VanDerPol-v0")
     frame = p.render()
     D = np.stack([pixels_per_unit(p, 0), pixels_per_unit(p, 1)], axis=1)
     shape = np.array([[0.30, 0.12], [0.12, 0.20]])
@@ -132,7 +124,7 @@ def test_a_phase_plane_ellipse_doubles_along_both_axes():
 
 
 def test_the_truth_and_the_measurement_are_drawn_at_the_same_magnification():
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     frame = p.render()
     rows_per_r = pixels_per_unit(p, 0)[1]                     # negative: r grows upwards
     sigma_r = 0.01 / abs(rows_per_r)                           # 2σ = 0.02 px on the frame
@@ -160,7 +152,7 @@ def test_the_truth_and_the_measurement_are_drawn_at_the_same_magnification():
 def test_a_region_that_shows_on_the_frame_draws_as_before(env_id):
     """A large covariance: no inset, the frame is the drawing without one (byte for byte
     today's drawing); a tiny one adds the inset and changes nothing else but its leader."""
-    p = plant(env_id)
+    p = plant_in_state(env_id)
     frame = p.render()
     n = len(p.state)
     x_hat = p.state + 0.05
@@ -180,7 +172,7 @@ def test_a_region_that_shows_on_the_frame_draws_as_before(env_id):
 
 
 def test_the_pendulum_gets_one_inset_per_body_in_opposite_corners():
-    p = plant("fir_gym/PendulumSlider-v0")
+    p = plant_in_state("fir_gym/PendulumSlider-v0")
     frame = p.render()
     drawn = p.draw_estimate(frame, p.state + 0.01, np.eye(4) * 1e-10)
     for rows, cols in boxes(frame):

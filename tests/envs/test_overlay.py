@@ -11,10 +11,12 @@ import pytest
 from frames import (
     ESTIMATE,
     MEASUREMENT,
+    STATES,
     centroid,
     near,
     pixels_of,
     plant_at,
+    plant_in_state,
     same_mapping,
     truth_centroids,
 )
@@ -24,14 +26,6 @@ from fir_gym.envs import _font
 from fir_gym.envs._overlay import RING_RADIUS
 
 ENV_IDS = fir_gym.ENV_IDS
-#: a state inside each plant's frame, away from its other drawn parts
-STATES = {
-    "fir_gym/Orbit-v0": (8.3, 1.0),
-    "fir_gym/UncertainOscillator-v0": (0.8, 0.0, 0.5),
-    "fir_gym/CarrierMotion-v0": (0.2, 0.0),
-    "fir_gym/VanDerPol-v0": (1.2, -0.7),
-    "fir_gym/PendulumSlider-v0": (0.05, 0.0, 0.6, 0.0),
-}
 #: an estimate a little off each state, in the coordinates the picture shows
 OFFSETS = {
     "fir_gym/Orbit-v0": (2.0, 0.3),
@@ -48,23 +42,16 @@ OFFSETS = {
 TOL = 1.5
 
 
-def plant(env_id):
-    p = gym.make(env_id, render_mode="rgb_array").unwrapped
-    p.reset(seed=0, options={"state": STATES[env_id]})
-    p.render()
-    return p
-
-
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_the_picture_is_where_the_plant_draws_its_state(env_id):
     """The state-to-pixel map against the frame: it must land on the plant's own bodies."""
-    p = plant(env_id)
+    p = plant_in_state(env_id)
     np.testing.assert_allclose(p.state_to_pixels(p.state), truth_centroids(p), atol=TOL)
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_an_estimate_ring_is_drawn_where_the_plant_would_draw_the_estimate(env_id):
-    p = plant(env_id)
+    p = plant_in_state(env_id)
     frame = p.render()
     assert not len(pixels_of(frame, ESTIMATE))             # the plant never uses the colour
     x_hat = p.state + np.asarray(OFFSETS[env_id])
@@ -85,7 +72,7 @@ def test_an_estimate_ring_is_drawn_where_the_plant_would_draw_the_estimate(env_i
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_the_measurement_is_marked_where_it_puts_the_state(env_id):
-    p = plant(env_id)
+    p = plant_in_state(env_id)
     frame = p.render()
     x = np.asarray(STATES[env_id], dtype=np.float64)
     implied = x + np.asarray(OFFSETS[env_id])              # the state a measurement reads
@@ -116,7 +103,7 @@ def _pixels_per_unit(p, i):
 def test_the_2sigma_error_bar_of_a_radius_spans_four_sigma():
     """Orbit-v0 draws the radius only: its 2σ region is a vertical bar of ±2σ_r, whatever
     the velocity's variance (the picture does not depend on it)."""
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     frame = p.render()
     per_unit = _pixels_per_unit(p, 0)
     assert abs(per_unit[0]) < 1e-9 and per_unit[1] < 0      # up the frame as r grows
@@ -136,7 +123,7 @@ def test_the_2sigma_error_bar_of_a_radius_spans_four_sigma():
 def test_the_2sigma_ellipse_of_the_phase_point():
     """VanDerPol-v0's picture is the phase plane: the 2σ ellipse is {v : vᵀ S⁻¹ v = 4} with
     S the covariance carried to pixels by the drawing's own scale (measured, not read)."""
-    p = plant("fir_gym/VanDerPol-v0")
+    p = plant_in_state("fir_gym/VanDerPol-v0")
     frame = p.render()
     D = np.stack([_pixels_per_unit(p, 0), _pixels_per_unit(p, 1)], axis=1)   # ∂pixel/∂x
     P = np.array([[0.30, 0.12], [0.12, 0.20]])
@@ -157,7 +144,7 @@ def test_the_2sigma_ellipse_of_the_phase_point():
 def test_a_region_thinner_than_a_pixel_or_not_finite_draws_no_region():
     """On the frame itself; a region that has a size is magnified in an inset instead
     (tests/envs/test_inset.py), one without (zero, NaN) nowhere."""
-    p = plant("fir_gym/VanDerPol-v0")
+    p = plant_in_state("fir_gym/VanDerPol-v0")
     frame = p.render()
     ring_only = p.draw_estimate(frame, p.state)
     legend = slice(0, 60), slice(0, 140)
@@ -173,7 +160,7 @@ def test_a_region_thinner_than_a_pixel_or_not_finite_draws_no_region():
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, 1e300])
 def test_an_estimate_off_the_numbers_draws_nothing_and_does_not_raise(bad):
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     frame = p.render()
     drawn = p.draw_estimate(frame, [bad, 0.0], np.eye(2), measurement=[bad])
     marks = pixels_of(drawn, ESTIMATE)
@@ -181,7 +168,7 @@ def test_an_estimate_off_the_numbers_draws_nothing_and_does_not_raise(bad):
 
 
 def test_bad_arguments_name_what_was_expected():
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     frame = p.render()
     with pytest.raises(ValueError, match="estimate must have 2"):
         p.draw_estimate(frame, [1.0, 2.0, 3.0])
@@ -196,7 +183,7 @@ def test_bad_arguments_name_what_was_expected():
 
 
 def test_the_view_records_the_time_of_the_frame():
-    p = plant("fir_gym/Orbit-v0")
+    p = plant_in_state("fir_gym/Orbit-v0")
     for _ in range(7):
         p.step(np.zeros(1))
     p.render()
@@ -204,7 +191,7 @@ def test_the_view_records_the_time_of_the_frame():
 
 
 def test_a_plant_with_its_view_survives_pickle_and_draws_alike():
-    p = plant("fir_gym/PendulumSlider-v0")
+    p = plant_in_state("fir_gym/PendulumSlider-v0")
     frame = p.render()
     q = pickle.loads(pickle.dumps(p))
     assert q.frame_view == p.frame_view

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 
@@ -21,6 +22,26 @@ from fir_gym.envs import _draw
 
 ESTIMATE = np.array(_draw.ESTIMATE, dtype=np.uint8)
 MEASUREMENT = np.array(_draw.MEASUREMENT, dtype=np.uint8)
+
+#: a state inside each plant's frame, away from its other drawn parts
+STATES = {
+    "fir_gym/Orbit-v0": (8.3, 1.0),
+    "fir_gym/UncertainOscillator-v0": (0.8, 0.0, 0.5),
+    "fir_gym/CarrierMotion-v0": (0.2, 0.0),
+    "fir_gym/VanDerPol-v0": (1.2, -0.7),
+    "fir_gym/PendulumSlider-v0": (0.05, 0.0, 0.6, 0.0),
+}
+
+
+def plant_in_state(env_id: str):
+    """The bare plant of ``env_id`` at its :data:`STATES` entry, rendered once (its frame view
+    set)."""
+    import fir_gym  # noqa: F401  (registers the ids)
+
+    p = gym.make(env_id, render_mode="rgb_array").unwrapped
+    p.reset(seed=0, options={"state": STATES[env_id]})
+    p.render()
+    return p
 
 
 def pixels_of(frame: np.ndarray, colour) -> np.ndarray:
