@@ -1,0 +1,44 @@
+"""fir-gym's optional JAX backend: the plants and their estimators as gymnax environments.
+
+Needs the ``jax`` extra (``pip install ".[jax]"`` in the fir-gym checkout; the CUDA build of
+JAX is ``pip install "jax[cuda12]"`` after it). Nothing else in fir-gym imports this
+package, so fir-gym works without JAX.
+
+**Float64.** The environments compute in float64, as the numpy plants and filters do (the
+Orbit plant's 100 Euler substeps and its EKF covariance lose too much in float32 to match
+them). Importing :mod:`fir_gym.jax` therefore turns on ``jax_enable_x64``
+(``jax.config.update("jax_enable_x64", True)``): a process-wide JAX setting, chosen at
+import rather than through a context because a jitted function is traced lazily, at its
+first call, long after any ``with`` block would have closed; gymnax environments run
+unchanged in x64 mode (their default dtypes become 64-bit). Every environment checks the
+flag when it is built and when it traces, and raises if it was turned off later.
+
+Environments: :class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000, simulation 1).
+"""
+
+from __future__ import annotations
+
+try:
+    import gymnax  # noqa: F401
+    import jax
+except ImportError as error:          # pragma: no cover - exercised without the extra
+    raise ImportError(
+        f"fir_gym.jax needs the optional extra 'jax' ({error.name} is missing): "
+        'pip install ".[jax]" in the fir-gym checkout') from error
+
+jax.config.update("jax_enable_x64", True)
+
+from ._x64 import require_x64  # noqa: E402  (after the x64 switch)
+from .orbit import (  # noqa: E402
+    Orbit,
+    OrbitNoise,
+    OrbitParams,
+    OrbitResetNoise,
+    OrbitState,
+    orbit_noise,
+    orbit_params,
+    orbit_reset_noise,
+)
+
+__all__ = ["Orbit", "OrbitNoise", "OrbitParams", "OrbitResetNoise", "OrbitState", "orbit_noise",
+           "orbit_params", "orbit_reset_noise", "require_x64"]

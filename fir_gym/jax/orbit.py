@@ -1,0 +1,419 @@
+"""Orbit-v0 as a gymnax environment: paper 000, simulation 1, with its EKF in the state.
+
+The JAX twin of :class:`fir_gym.envs.orbit.OrbitEnv` (the numpy reference) seen through
+:func:`fir_gym.wrappers.factory.wrap_observation` — one of three observation kinds:
+
+* ``"true"``: the true state ``[r, v]`` (:class:`~fir_gym.wrappers.baselines.TrueStateObservation`);
+* ``"measurement"``: the raw measurement ``[r + noise]`` (the plant's own observation);
+* ``"ekf"``: the extended Kalman filter's estimate ``x̂`` of ``[r, v]``
+  (:class:`~fir_gym.wrappers.EstimatorObservation` with
+  :class:`~fir_gym.estimators.extended.ExtendedKalmanFilter` and ``observation="estimate"``);
+  the filter's mean, covariance and divergence watch live in :class:`OrbitState`.
+
+**Plant** (paper 000, eq (27), with a radial thrust ``a = action · thrust_max`` held over
+the interval): ``r ← r + v Δ``, ``v ← v + (a − μ / r²) Δ``, ``Δ = euler_dt``, repeated
+``substeps`` (M = 100) times per env step (:func:`orbit_interval`, a
+:func:`jax.lax.fori_loop`, mirrors :meth:`fir_gym.envs.orbit.OrbitDynamics.propagate`
+operation for operation, Jacobian product included), then ``+ w``, ``w ~ N(0, Q)``
+(Q = 0 by default, as in the paper). Measurement, eq (28): ``y = r + v``, ``v ~ N(0, R)``.
+Reward ``−min((r' − r_ref)² + 0.01 action², cost_cap)``; termination when ``r' ∉ (r_min,
+r_max)``, paid ``−cost_cap (1 + steps left to max_steps_in_episode)``; a step whose new
+state is not finite or beyond ``±state_limit`` (or whose reward or measurement is not
+finite) is a simulation failure: the plant stays at its last valid state, the observation
+repeats, the reward is the terminal penalty and the episode terminates (``info
+["simulation_failure"]``: 0 none, 1 nonfinite_state, 2 state_overflow, 3
+nonfinite_observation, 4 nonfinite_reward — :data:`SIMULATION_FAILURES`). Truncation at
+``max_steps_in_episode`` (gymnax's ``is_truncated``, the registered ``TimeLimit``).
+Actions are clipped to ``[-1, 1]`` (``info["action_clipped"]``); a NaN action, which the
+numpy plant refuses with a ``ValueError``, cannot raise under ``jit``: it makes the new
+state NaN, a simulation failure.
+
+**EKF** (:mod:`fir_gym.estimators.extended`): the model believes the nominal parameters
+(``nominal_mu`` = 19.91 by default, the truth being 19.92244165). Prior: the plant's
+initial-state mean, covariance ``initial_state_cov + 1e-9 diag(max(1, x0²))``
+(:func:`fir_gym.wrappers.estimator_observation.prior_of`). ``reset`` consumes ``y[0]``
+(update only); each step predicts with the applied action — ``x⁻ = f(x̂, u)``, ``P⁻ = F P Fᵀ
++ Q`` with ``F`` the product of the Euler Jacobians — then makes the Joseph-form update with
+``H = [1, 0]``. The numpy reference computes the Joseph form from factors (``gram(M, N)``,
+:func:`fir_gym.estimators._kalman_linalg.factored_joseph`); here it is the plain product
+``A P Aᵀ + K R Kᵀ``, symmetrised — the same matrix up to round-off for the covariances this
+plant produces. The divergence watch is the numpy one with its defaults
+(:meth:`fir_gym.estimators.base.Estimator._accept`): a non-finite estimate or covariance is
+not stored (the last finite one stays), and the sticky ``diverged`` flag is raised by it,
+by ``trace P > max_covariance_trace`` or by ``nis_patience`` consecutive NIS above the
+``1 − nis_tail`` χ² quantile.
+
+**Noise contract.** Every random number comes from the ``key`` of ``reset_env`` /
+``step_env``: :func:`orbit_reset_noise` splits the reset key in two — ``(k_initial,
+k_measurement) = jax.random.split(key)`` — and :func:`orbit_noise` the step key likewise —
+``(k_process, k_measurement)``; each half draws standard normals (``(2,)`` for the state,
+``(1,)`` for the measurement) that the square roots of the covariances (``V Λ^½`` from
+``eigh``, as :func:`fir_gym.envs._base.psd_sqrt`) turn into the physical increments. The
+pure functions :meth:`Orbit.reset_with_noise` and :meth:`Orbit.step_with_noise` take those
+increments (:class:`OrbitResetNoise`, :class:`OrbitNoise`) instead of a key, so a caller
+can drive the JAX env with any noise sequence — the parity tests drive the numpy env and
+this one with the same numbers.
+
+Everything is a pure function of its arguments: ``jit``-able, ``vmap``-able over keys,
+states and parameters (:class:`OrbitParams` is a pytree; ``substeps`` and
+``nominal_substeps`` are static).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnax.environments.environment as gymnax_env
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+from gymnax.environments import spaces
+
+from ._x64 import require_x64
+
+#: the true gravitational parameter and the one the filter's model believes (paper 000)
+TRUE_MU = 19.92244165
+NOMINAL_MU = 19.91
+#: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`)
+STATE_LIMIT = 1e150
+#: the observation kinds
+KINDS = ("true", "measurement", "ekf")
+#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
+SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
+                       "nonfinite_reward")
+#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
+PRIOR_FLOOR = 1e-9
+
+
+@struct.dataclass
+class OrbitParams(gymnax_env.EnvParams):
+    """The physical, noise and filter parameters (a pytree: any float field can be vmapped).
+
+    The first group is the truth (:class:`fir_gym.envs.orbit.OrbitEnv`'s keywords), the
+    ``nominal_*`` fields what the EKF's model believes (its ``nominal=`` dict), the last
+    group the filter's divergence watch (:class:`fir_gym.estimators.base.Estimator`'s
+    defaults). Build one with :func:`orbit_params`, which also validates.
+    """
+
+    max_steps_in_episode: int = 1000
+    mu: Any = TRUE_MU
+    thrust_max: Any = 1.0
+    euler_dt: Any = 1e-4
+    R: Any = 1e-3                       # measurement noise variance (n_y = 1)
+    Q: Any = struct.field(default_factory=lambda: jnp.zeros((2, 2)))   # process noise
+    r_ref: Any = 8.0
+    r_min: Any = 1.0
+    r_max: Any = 100.0
+    initial_state: Any = struct.field(default_factory=lambda: jnp.array([7.99, 1.99]))
+    initial_state_cov: Any = struct.field(default_factory=lambda: jnp.zeros((2, 2)))
+    state_limit: Any = STATE_LIMIT
+    nominal_mu: Any = NOMINAL_MU
+    nominal_thrust_max: Any = 1.0
+    nominal_euler_dt: Any = 1e-4
+    nominal_R: Any = 1e-3
+    nominal_Q: Any = struct.field(default_factory=lambda: jnp.zeros((2, 2)))
+    max_covariance_trace: Any = 1e12
+    #: ``scipy.stats.chi2.isf(nis_tail, 1)`` for the default ``nis_tail = 1e-9``
+    nis_threshold: Any = 37.324893051362324
+    nis_patience: Any = 10
+    substeps: int = struct.field(pytree_node=False, default=100)
+    nominal_substeps: int = struct.field(pytree_node=False, default=100)
+
+
+@struct.dataclass
+class OrbitState(gymnax_env.EnvState):
+    """The plant, its last observation and the EKF (mean, covariance, watch)."""
+
+    time: Any
+    x: Any                    # true state [r, v]
+    y: Any                    # the last measurement (1,): a failed step repeats it
+    terminated: Any
+    filter_x: Any             # EKF mean (the last finite one)
+    filter_P: Any             # EKF covariance
+    nis: Any                  # this step's normalised innovation squared
+    nis_run: Any              # consecutive NIS above the threshold
+    diverged: Any             # sticky divergence flag
+
+
+@struct.dataclass
+class OrbitResetNoise:
+    """The physical noise of a reset: ``initial`` (2,) added to ``initial_state``,
+    ``measurement`` (1,) added to ``r``."""
+
+    initial: Any
+    measurement: Any
+
+
+@struct.dataclass
+class OrbitNoise:
+    """The physical noise of a step: ``process`` (2,) added to the new state (``w``),
+    ``measurement`` (1,) added to its ``r`` (``v``)."""
+
+    process: Any
+    measurement: Any
+
+
+def orbit_params(*, mu: float = TRUE_MU, R: float = 1e-3, Q: Any = None, euler_dt: float = 1e-4,
+                 substeps: int = 100, thrust_max: float = 1.0, r_ref: float = 8.0,
+                 r_min: float = 1.0, r_max: float = 100.0, nominal: dict[str, Any] | None = None,
+                 initial_state: Any = (7.99, 1.99), initial_state_cov: Any = None,
+                 max_episode_steps: int = 1000, max_covariance_trace: float = 1e12,
+                 nis_tail: float = 1e-9, nis_patience: int = 10) -> OrbitParams:
+    """:class:`OrbitParams` from :class:`fir_gym.envs.orbit.OrbitEnv`'s keywords (and the
+    EKF's watch options); ``nominal`` as there (keys ``mu, R, Q, euler_dt, substeps,
+    thrust_max``; ``{"mu": 19.91}`` by default). Host-side: validates and converts."""
+    require_x64()
+    from scipy.stats import chi2
+
+    truth = {"mu": mu, "R": R, "Q": np.zeros((2, 2)) if Q is None else Q,
+             "euler_dt": euler_dt, "substeps": substeps, "thrust_max": thrust_max}
+    believed = {**truth, "mu": NOMINAL_MU, **(nominal or {})}
+    unknown = sorted(set(believed) - set(truth))
+    if unknown:
+        raise ValueError(f"nominal has unknown parameter(s) {unknown}; known parameters are "
+                         f"{sorted(truth)}")
+    for name, value in (("mu", mu), ("euler_dt", euler_dt), ("thrust_max", thrust_max),
+                        ("r_ref", r_ref), ("r_min", r_min), ("r_max", r_max)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be positive and finite; got {value!r}")
+    if not r_min < r_ref < r_max:
+        raise ValueError(f"need r_min < r_ref < r_max; got {r_min}, {r_ref}, {r_max}")
+
+    def cov(name: str, value: Any, n: int) -> jax.Array:
+        M = np.asarray(value, dtype=np.float64).reshape(n, n)
+        if not (np.allclose(M, M.T) and np.linalg.eigvalsh(M).min() >= -1e-12 * abs(M).max()):
+            raise ValueError(f"{name} must be a symmetric positive semidefinite {n}x{n} matrix")
+        return jnp.asarray(M)
+
+    x0 = np.asarray(initial_state, dtype=np.float64).reshape(2)
+    return OrbitParams(
+        max_steps_in_episode=int(max_episode_steps),
+        mu=float(mu), thrust_max=float(thrust_max), euler_dt=float(euler_dt),
+        R=float(cov("R", R, 1)[0, 0]), Q=cov("Q", truth["Q"], 2), r_ref=float(r_ref),
+        r_min=float(r_min), r_max=float(r_max), initial_state=jnp.asarray(x0),
+        initial_state_cov=cov("initial_state_cov",
+                              np.zeros((2, 2)) if initial_state_cov is None else initial_state_cov,
+                              2),
+        nominal_mu=float(believed["mu"]), nominal_thrust_max=float(believed["thrust_max"]),
+        nominal_euler_dt=float(believed["euler_dt"]),
+        nominal_R=float(cov("nominal R", believed["R"], 1)[0, 0]),
+        nominal_Q=cov("nominal Q", believed["Q"], 2),
+        max_covariance_trace=float(max_covariance_trace),
+        nis_threshold=float(chi2.isf(nis_tail, 1)), nis_patience=int(nis_patience),
+        substeps=int(substeps), nominal_substeps=int(believed["substeps"]))
+
+
+# ---------------------------------------------------------------------------- pure functions
+def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Array,
+                   substeps: int) -> tuple[jax.Array, jax.Array]:
+    """One measurement interval of paper 000's eq (27): ``substeps`` Euler steps of
+    ``r ← r + v Δ, v ← v + (a − μ/r²) Δ`` from ``x = [r, v]`` under the thrust acceleration
+    ``a`` (a scalar, in physical units), and the interval's Jacobian, the product of the
+    Euler Jacobians ``I + Δ [[0, 1], [2μ/r³, 0]]`` along the path. The operations of
+    :meth:`fir_gym.envs.orbit.OrbitDynamics.propagate`, in its order."""
+    d = euler_dt
+
+    def substep(_: Any, carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+        r, v, j11, j12, j21, j22 = carry
+        g = 2.0 * mu / (r * r * r) * d
+        j11, j12, j21, j22 = j11 + d * j21, j12 + d * j22, j21 + g * j11, j22 + g * j12
+        return r + v * d, v + (a - mu / (r * r)) * d, j11, j12, j21, j22
+
+    one, zero = jnp.ones_like(x[0]), jnp.zeros_like(x[0])
+    r, v, j11, j12, j21, j22 = jax.lax.fori_loop(0, substeps, substep,
+                                                 (x[0], x[1], one, zero, zero, one))
+    return jnp.stack([r, v]), jnp.array([[j11, j12], [j21, j22]])
+
+
+def _psd_sqrt(M: jax.Array) -> jax.Array:
+    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`."""
+    w, V = jnp.linalg.eigh(M)
+    return V * jnp.sqrt(jnp.clip(w, 0.0, None))
+
+
+def orbit_reset_noise(key: jax.Array, params: OrbitParams) -> OrbitResetNoise:
+    """The noise of a reset: ``k_initial, k_measurement = jax.random.split(key)``;
+    ``initial = sqrt(initial_state_cov) z₁``, ``measurement = sqrt(R) z₂``."""
+    k_initial, k_measurement = jax.random.split(key)
+    z1 = jax.random.normal(k_initial, (2,), dtype=jnp.float64)
+    z2 = jax.random.normal(k_measurement, (1,), dtype=jnp.float64)
+    return OrbitResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z1,
+                           jnp.sqrt(params.R) * z2)
+
+
+def orbit_noise(key: jax.Array, params: OrbitParams) -> OrbitNoise:
+    """The noise of a step: ``k_process, k_measurement = jax.random.split(key)``;
+    ``process = sqrt(Q) z₁`` (zero for the default Q = 0), ``measurement = sqrt(R) z₂``."""
+    k_process, k_measurement = jax.random.split(key)
+    z1 = jax.random.normal(k_process, (2,), dtype=jnp.float64)
+    z2 = jax.random.normal(k_measurement, (1,), dtype=jnp.float64)
+    return OrbitNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z1, jnp.sqrt(params.R) * z2)
+
+
+def _symmetrize(P: jax.Array) -> jax.Array:
+    return 0.5 * (P + P.T)
+
+
+def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array
+               ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The Joseph-form update of the prior ``(x, P)`` with ``y`` (1,), ``H = [1, 0]``:
+    ``(x⁺, P⁺, nis)``; a non-positive ``S`` gives NaN (the watch then keeps the prior)."""
+    e = y[0] - x[0]
+    S = P[0, 0] + R
+    W = jnp.where(S > 0.0, 1.0 / S, jnp.nan)
+    K = P[:, 0] * W
+    A = jnp.eye(2) - jnp.outer(K, jnp.array([1.0, 0.0]))
+    P_new = _symmetrize(A @ P @ A.T + R * jnp.outer(K, K))
+    return x + K * e, P_new, e * W * e
+
+
+def ekf_watch(state: OrbitState, x: jax.Array, P: jax.Array, nis: jax.Array,
+              params: OrbitParams) -> OrbitState:
+    """:meth:`fir_gym.estimators.base.Estimator._accept` for one system: store the new
+    estimate where it is finite, count high NIS, raise the sticky ``diverged`` flag."""
+    finite = jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(P))
+    trace = jnp.where(finite, jnp.trace(P), 0.0)
+    high = ~(nis <= params.nis_threshold)                 # NaN counts as above
+    nis_run = jnp.where(high, state.nis_run + 1, 0)
+    blown = ~finite | (trace > params.max_covariance_trace) | (nis_run >= params.nis_patience)
+    return state.replace(filter_x=jnp.where(finite, x, state.filter_x),
+                         filter_P=jnp.where(finite, P, state.filter_P), nis=nis,
+                         nis_run=nis_run, diverged=state.diverged | blown)
+
+
+def ekf_prior(params: OrbitParams) -> tuple[jax.Array, jax.Array]:
+    """The EKF's prior: the plant's initial-state mean and covariance, floored
+    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
+    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
+    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
+        jnp.maximum(1.0, x0 ** 2))
+
+
+# ---------------------------------------------------------------------------- the environment
+class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
+    """``fir_gym/Orbit-v0`` as a gymnax environment observing ``kind`` (see the module
+    docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default).
+
+    ``reset_env(key, params)`` and ``step_env(key, state, action, params)`` draw their noise
+    from ``key`` (:func:`orbit_reset_noise`, :func:`orbit_noise`) and call the pure
+    :meth:`reset_with_noise` / :meth:`step_with_noise`. gymnax's ``step`` adds the
+    auto-reset and ``is_truncated`` (``time >= max_steps_in_episode``). ``info`` has
+    ``state`` (the true state), ``action`` (applied, float64), ``action_clipped``,
+    ``simulation_failure`` (a code, 0 for none) and, for ``"ekf"``, ``estimate``,
+    ``estimation_error``, ``estimator_diverged`` and ``nis``.
+    """
+
+    def __init__(self, kind: str = "ekf") -> None:
+        super().__init__()
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
+        require_x64()
+        self.kind = kind
+
+    @property
+    def default_params(self) -> OrbitParams:
+        return orbit_params()
+
+    @property
+    def name(self) -> str:
+        return "fir_gym/Orbit-v0"
+
+    @property
+    def num_actions(self) -> int:
+        return 1
+
+    # ------------------------------------------------------------------ reset
+    def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[jax.Array, OrbitState]:
+        return self.reset_with_noise(orbit_reset_noise(key, params), params)
+
+    def reset_with_noise(self, noise: OrbitResetNoise, params: OrbitParams
+                         ) -> tuple[jax.Array, OrbitState]:
+        """The reset with the given noise: ``x = initial_state + noise.initial``,
+        ``y = r + noise.measurement``; the EKF (for ``"ekf"``) consumes ``y`` from its prior."""
+        require_x64()
+        x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
+        y = x[:1] + noise.measurement
+        x0, P0 = ekf_prior(params)
+        state = OrbitState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
+                           terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
+                           nis=jnp.asarray(jnp.nan), nis_run=jnp.asarray(0, dtype=jnp.int64),
+                           diverged=jnp.asarray(False))
+        if self.kind == "ekf":
+            state = ekf_watch(state, *ekf_update(x0, P0, y, params.nominal_R), params)
+        return self.get_obs(state, params), state
+
+    # ------------------------------------------------------------------ step
+    def step_env(self, key: jax.Array, state: OrbitState, action: Any, params: OrbitParams
+                 ) -> tuple[jax.Array, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
+        return self.step_with_noise(state, action, orbit_noise(key, params), params)
+
+    def step_with_noise(self, state: OrbitState, action: Any, noise: OrbitNoise,
+                        params: OrbitParams
+                        ) -> tuple[jax.Array, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+
+        :meth:`fir_gym.envs._base.PlantEnv.step` of :class:`~fir_gym.envs.orbit.OrbitEnv`
+        (and, for ``"ekf"``, the EKF step of
+        :class:`~fir_gym.wrappers.EstimatorObservation`), without Python branches.
+        """
+        require_x64()
+        u_in = jnp.reshape(jnp.asarray(action, dtype=jnp.float64), (1,))
+        u = jnp.clip(u_in, -1.0, 1.0)
+        x = state.x
+        x_det, _ = orbit_interval(x, u[0] * params.thrust_max, params.mu, params.euler_dt,
+                                  params.substeps)
+        x_next = x_det + noise.process
+        time = state.time + 1
+        left = jnp.maximum(params.max_steps_in_episode - time, 0)
+        cost_cap = (params.r_ref - params.r_min) ** 2 + 0.01
+        penalty = -cost_cap * (1.0 + left)
+
+        finite_state = jnp.all(jnp.isfinite(x_next))
+        overflow = jnp.any(jnp.abs(x_next) > params.state_limit)
+        r = x_next[0]
+        in_domain = (params.r_min < r) & (r < params.r_max)
+        e = r - params.r_ref
+        cost = e * e + 0.01 * u[0] * u[0]
+        reward = jnp.where(in_domain, -jnp.where(cost < cost_cap, cost, cost_cap), penalty)
+        y_next = x_next[:1] + noise.measurement
+        failure = jnp.select(
+            [~finite_state, overflow, ~jnp.isfinite(reward), ~jnp.all(jnp.isfinite(y_next))],
+            [1, 2, 4, 3], 0)
+        failed = failure > 0
+        x_kept = jnp.where(failed, x, x_next)
+        y = jnp.where(failed, state.y, y_next)
+        reward = jnp.where(failed, penalty, reward)
+        terminated = failed | ~in_domain
+        new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
+        info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
+                                "simulation_failure": failure}
+        if self.kind == "ekf":
+            xp, F = orbit_interval(state.filter_x, u[0] * params.nominal_thrust_max,
+                                   params.nominal_mu, params.nominal_euler_dt,
+                                   params.nominal_substeps)
+            Pp = _symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
+            new = ekf_watch(new, *ekf_update(xp, Pp, y, params.nominal_R), params)
+            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
+                        estimator_diverged=new.diverged, nis=new.nis)
+        return self.get_obs(new, params), new, reward, terminated, info
+
+    # ------------------------------------------------------------------ views
+    def get_obs(self, state: OrbitState, params: OrbitParams | None = None,
+                key: jax.Array | None = None) -> jax.Array:
+        if self.kind == "true":
+            return state.x
+        if self.kind == "measurement":
+            return state.y
+        return state.filter_x
+
+    def is_terminated(self, state: OrbitState, params: OrbitParams) -> jax.Array:
+        return state.terminated
+
+    def observation_space(self, params: OrbitParams) -> spaces.Box:
+        n = 1 if self.kind == "measurement" else 2
+        return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
+
+    def action_space(self, params: OrbitParams | None = None) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
