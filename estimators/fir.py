@@ -169,11 +169,10 @@ class FIRFilter(WindowedEstimator):
             terms = getattr(self, "_test_matrices", None)
             if terms is None:
                 m = self.model.matrices(0)  # type: ignore[attr-defined]
-                terms = self._test_matrices = (
-                    np.ascontiguousarray(m.A.T), np.ascontiguousarray(m.B.T),
-                    np.ascontiguousarray(m.C.T), np.ascontiguousarray(m.A[None]),
-                    np.ascontiguousarray((m.G @ m.Q @ m.G.T)[None]),
-                    np.ascontiguousarray(m.C[None]), np.ascontiguousarray(m.R))
+                # fresh C-ordered copies: a view's stride-0 leading axis (``A[None]``) would
+                # take another matmul loop than its pickled copy (make_window says why)
+                terms = self._test_matrices = tuple(M.copy(order="C") for M in (
+                    m.A.T, m.B.T, m.C.T, m.A[None], (m.G @ m.Q @ m.G.T)[None], m.C[None], m.R))
             At, Bt, Ct, A, Qx, C, R = terms
         else:
             now = self.model.matrices(k)  # type: ignore[attr-defined]

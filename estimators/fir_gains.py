@@ -68,14 +68,19 @@ class GainResult(NamedTuple):
 
 def make_window(A: ArrayLike, C: ArrayLike, Qx: ArrayLike, R: ArrayLike, horizon: int,
                 B: ArrayLike | None = None) -> Window:
-    """Stack matrices into a :class:`Window`; a 2-D matrix is repeated ``horizon`` times."""
+    """Stack matrices into a :class:`Window`; a 2-D matrix is repeated ``horizon`` times.
+
+    The stacks are fresh C-ordered arrays, never broadcast views: numpy's ``matmul`` takes a
+    different loop (and so rounds differently) for a stride-0 view than for the same values
+    stored, and a copy (``pickle``) stores them — a filter and its copy would drift apart in
+    the last bits."""
     def stack(M: ArrayLike) -> FloatArray:
         M = np.asarray(M, dtype=np.float64)
         if M.ndim == 2:
             M = np.broadcast_to(M, (horizon, *M.shape))
         if M.ndim != 3 or M.shape[0] != horizon:
             raise ValueError(f"window matrices must be 2-D or ({horizon}, ., .); got {M.shape}")
-        return M
+        return M.copy(order="C")
     A_, C_ = stack(A), stack(C)
     B_ = np.zeros((horizon, A_.shape[1], 0)) if B is None else stack(B)
     return Window(A_, C_, stack(Qx), stack(R), B_)
