@@ -32,6 +32,11 @@ would then count as killed.
   seed (the same code gives the same sample), so that a full run of every module fits in
   about an hour on 2 cores; the kill rate is then an estimate and the table gives its 95 %
   (Wilson) interval;
+* ``cold-cache``: the modules (glob patterns) whose numba kernels are inlined into kernels
+  of other files: their mutants run with numba's cache emptied first (numba checks a cached
+  kernel against its own file only, so a cached caller would run the unmutated callee —
+  a gross mutant of ``estimators/compiled/linalg.py`` survived that way), at the cost of
+  compiling the kernels the tests use for every mutant;
 * ``equivalent``: the mutants triaged as equivalent (they cannot change any result), each
   with its module, operator, mutated line and the reason; they leave the kill rate's
   denominator and are listed with their reason.
@@ -52,10 +57,13 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import fnmatch
 import json
 import math
+import os
 import random
 import re
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -90,6 +98,8 @@ class Configuration:
     sample: int
     seed: int
     equivalent: list[Equivalent]
+    #: modules (glob patterns) whose mutants run with numba's cache emptied
+    cold_cache: list[str]
 
     def keeps(self, operator: str) -> bool:
         return any(re.fullmatch(pattern, operator) for pattern in self.operators)
@@ -130,18 +140,28 @@ def configuration(root: Path = ROOT) -> Configuration:
         raise SystemExit(f"[tool.fir-gym.mutation] equivalent mutants of unlisted modules: "
                          f"{unknown}")
     return Configuration(modules, [str(p) for p in table["operators"]], int(table["sample"]),
-                         int(table["seed"]), equivalent)
+                         int(table["seed"]), equivalent,
+                         [str(p) for p in table.get("cold-cache", [])])
 
 
-def test_command(tests: list[str]) -> list[str]:
-    """The test command of a module (``-P``: the checkout's root stays off ``sys.path``)."""
-    return [sys.executable, "-P", "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests]
+def test_command(tests: list[str], cold_cache: Path | None = None) -> str:
+    """The test command of a module (``-P``: the checkout's root stays off ``sys.path``).
+
+    With ``cold_cache``, numba's cache folder is emptied before the tests and used by them:
+    a cached kernel of another file that inlined a function of the mutated module would
+    otherwise run the unmutated code (numba checks only the kernel's own file's stamp).
+    """
+    pytest = " ".join([sys.executable, "-P", "-m", "pytest", "-x", "-q", "-p",
+                       "no:cacheprovider", *tests])
+    if cold_cache is None:
+        return pytest
+    return f"sh -c 'rm -rf {cold_cache} && NUMBA_CACHE_DIR={cold_cache} exec {pytest}'"
 
 
-def baseline(module: str, tests: list[str]) -> float:
+def baseline(module: str, command: str) -> float:
     """Run the module's tests unmutated; their time in s. Stops the run if they fail."""
     start = time.perf_counter()
-    run = subprocess.run(test_command(tests), cwd=ROOT, capture_output=True, text=True)
+    run = subprocess.run(shlex.split(command), cwd=ROOT, capture_output=True, text=True)
     if run.returncode != 0:
         tail = "\n".join(run.stdout.strip().splitlines()[-15:])
         raise SystemExit(f"the unmutated tests of {module} do not pass (exit "
@@ -169,8 +189,9 @@ def run_module(module: str, config: Configuration, work: Path, commit: str) -> O
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome, WorkResult
 
-    tests = config.modules[module]
-    timeout = max(60.0, 5.0 * baseline(module, tests))
+    cold = any(fnmatch.fnmatch(module, pattern) for pattern in config.cold_cache)
+    command = test_command(config.modules[module], work / "numba-cold" if cold else None)
+    timeout = max(60.0, 5.0 * baseline(module, command))
     cr_config = work / "cosmic-ray.toml"
     session = work / f"{module.replace('/', '_')}.sqlite"
     session.unlink(missing_ok=True)
@@ -179,7 +200,7 @@ def run_module(module: str, config: Configuration, work: Path, commit: str) -> O
         f'module-path = "{module}"\n'
         f"timeout = {timeout}\n"
         "excluded-modules = []\n"
-        f'test-command = "{" ".join(test_command(tests))}"\n\n'
+        f'test-command = "{command}"\n\n'
         "[cosmic-ray.distributor]\n"
         'name = "local"\n')
     subprocess.run(["cosmic-ray", "init", str(cr_config), str(session)], cwd=ROOT, check=True)
@@ -258,7 +279,7 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
     lines += ["", f"Over all modules: {total_killed} of {total_competent} non-equivalent "
               f"mutants killed ({total_killed / max(total_competent, 1):.1%}), in "
               f"{sum(o.seconds for o in outcomes) / 60:.0f} min of mutant runs."]
-    for o, equivalent in rows:
+    for o, _ in rows:
         if not o.survivors:
             continue
         lines += ["", f"## Survivors in `{o.module}`", ""]
@@ -297,6 +318,8 @@ def main(argv: list[str] | None = None) -> int:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
                                 capture_output=True, check=True).stdout.strip()
         with tempfile.TemporaryDirectory(prefix="fir-gym-mutation-") as work:
+            # one numba cache for the run, outside the checkout (the cold modules use their own)
+            os.environ["NUMBA_CACHE_DIR"] = str(Path(work) / "numba")
             for module in args.modules or list(config.modules):
                 o = run_module(module, config, Path(work), commit)
                 name = module.replace("/", "_").removesuffix(".py") + ".json"
