@@ -32,11 +32,12 @@ would then count as killed.
   seed (the same code gives the same sample), so that a full run of every module fits in
   about an hour on 2 cores; the kill rate is then an estimate and the table gives its 95 %
   (Wilson) interval;
-* ``cold-cache``: the modules (glob patterns) whose numba kernels are inlined into kernels
-  of other files: their mutants run with numba's cache emptied first (numba checks a cached
-  kernel against its own file only, so a cached caller would run the unmutated callee —
-  a gross mutant of ``estimators/compiled/linalg.py`` survived that way), at the cost of
-  compiling the kernels the tests use for every mutant;
+* ``cold-cache``: the modules whose numba kernels are compiled into kernels of other files
+  (an inlined piece or a called kernel): their mutants run with numba's cache emptied first
+  — numba checks a cached kernel against its own file only, so a cached caller would run the
+  unmutated callee (a gross mutant of ``estimators/compiled/linalg.py`` survived that way).
+  Each of their mutants then compiles every kernel its tests use (a minute or two on 2
+  cores), so they run ``cold-sample`` mutants instead of ``sample``;
 * ``equivalent``: the mutants triaged as equivalent (they cannot change any result), each
   with its module, operator, mutated line and the reason; they leave the kill rate's
   denominator and are listed with their reason.
@@ -57,7 +58,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import fnmatch
 import json
 import math
 import os
@@ -98,8 +98,12 @@ class Configuration:
     sample: int
     seed: int
     equivalent: list[Equivalent]
-    #: modules (glob patterns) whose mutants run with numba's cache emptied
+    #: modules whose mutants run with numba's cache emptied, and their sample size
     cold_cache: list[str]
+    cold_sample: int
+
+    def sample_size(self, module: str) -> int:
+        return self.cold_sample if module in self.cold_cache else self.sample
 
     def keeps(self, operator: str) -> bool:
         return any(re.fullmatch(pattern, operator) for pattern in self.operators)
@@ -135,13 +139,15 @@ def configuration(root: Path = ROOT) -> Configuration:
         if missing:
             raise SystemExit(f"[tool.fir-gym.mutation] names files that do not exist: {missing}")
     equivalent = [Equivalent(**e) for e in table.get("equivalent", [])]
-    unknown = sorted({e.module for e in equivalent} - set(modules))
+    cold = [str(m) for m in table.get("cold-cache", [])]
+    unknown = sorted(({e.module for e in equivalent} | set(cold)) - set(modules))
     if unknown:
-        raise SystemExit(f"[tool.fir-gym.mutation] equivalent mutants of unlisted modules: "
-                         f"{unknown}")
+        raise SystemExit("[tool.fir-gym.mutation] equivalent or cold-cache entries of "
+                         f"unlisted modules: {unknown}")
     return Configuration(modules, [str(p) for p in table["operators"]], int(table["sample"]),
                          int(table["seed"]), equivalent,
-                         [str(p) for p in table.get("cold-cache", [])])
+                         cold,
+                         int(table.get("cold-sample", table["sample"])))
 
 
 def test_command(tests: list[str], cold_cache: Path | None = None) -> str:
@@ -175,7 +181,8 @@ def sample(items: list, config: Configuration, module: str) -> list:
     kept.sort(key=lambda i: (i.mutations[0].start_pos, i.mutations[0].operator_name,
                              i.mutations[0].occurrence))
     rng = random.Random(f"{config.seed}:{module}")
-    return kept if len(kept) <= config.sample else rng.sample(kept, config.sample)
+    size = config.sample_size(module)
+    return kept if len(kept) <= size else rng.sample(kept, size)
 
 
 def mutated_line(diff: str | None) -> str:
@@ -189,7 +196,7 @@ def run_module(module: str, config: Configuration, work: Path, commit: str) -> O
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome, WorkResult
 
-    cold = any(fnmatch.fnmatch(module, pattern) for pattern in config.cold_cache)
+    cold = module in config.cold_cache
     command = test_command(config.modules[module], work / "numba-cold" if cold else None)
     timeout = max(60.0, 5.0 * baseline(module, command))
     cr_config = work / "cosmic-ray.toml"
