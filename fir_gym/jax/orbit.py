@@ -44,11 +44,12 @@ by ``trace P > max_covariance_trace`` or by ``nis_patience`` consecutive NIS abo
 ``1 − nis_tail`` χ² quantile.
 
 **Noise contract.** Every random number comes from the ``key`` of ``reset_env`` /
-``step_env``: :func:`orbit_reset_noise` splits the reset key in two — ``(k_initial,
-k_measurement) = jax.random.split(key)`` — and :func:`orbit_noise` the step key likewise —
-``(k_process, k_measurement)``; each half draws standard normals (``(2,)`` for the state,
-``(1,)`` for the measurement) that the square roots of the covariances (``V Λ^½`` from
-``eigh``, as :func:`fir_gym.envs._base.psd_sqrt`) turn into the physical increments. The
+``step_env`` (gymnax's ``step`` splits its key into the step's and the auto-reset's):
+:func:`orbit_reset_noise` and :func:`orbit_noise` each make one draw ``z =
+jax.random.normal(key, (3,))`` — ``z[:2]`` for the state (the initial-state spread, or the
+process noise ``w``), ``z[2:]`` for the measurement — that the square roots of the
+covariances (``V Λ^½`` from ``eigh``, as :func:`fir_gym.envs._base.psd_sqrt`) turn into the
+physical increments. The
 pure functions :meth:`Orbit.reset_with_noise` and :meth:`Orbit.step_with_noise` take those
 increments (:class:`OrbitResetNoise`, :class:`OrbitNoise`) instead of a key, so a caller
 can drive the JAX env with any noise sequence — the parity tests drive the numpy env and
@@ -83,6 +84,10 @@ KINDS = ("true", "measurement", "ekf")
 #: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
 SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
                        "nonfinite_reward")
+#: the Euler loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``):
+#: 1.25x the env-steps/s of no unrolling on a CPU at 2048 envs; 25 compiles slowly and runs
+#: slower (scripts/jax_stepping_speed.py)
+UNROLL = 10
 #: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
 PRIOR_FLOOR = 1e-9
 
@@ -223,7 +228,8 @@ def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Arra
 
     one, zero = jnp.ones_like(x[0]), jnp.zeros_like(x[0])
     r, v, j11, j12, j21, j22 = jax.lax.fori_loop(0, substeps, substep,
-                                                 (x[0], x[1], one, zero, zero, one))
+                                                 (x[0], x[1], one, zero, zero, one),
+                                                 unroll=min(UNROLL, max(substeps, 1)))
     return jnp.stack([r, v]), jnp.array([[j11, j12], [j21, j22]])
 
 
@@ -234,22 +240,20 @@ def _psd_sqrt(M: jax.Array) -> jax.Array:
 
 
 def orbit_reset_noise(key: jax.Array, params: OrbitParams) -> OrbitResetNoise:
-    """The noise of a reset: ``k_initial, k_measurement = jax.random.split(key)``;
-    ``initial = sqrt(initial_state_cov) z₁``, ``measurement = sqrt(R) z₂``."""
-    k_initial, k_measurement = jax.random.split(key)
-    z1 = jax.random.normal(k_initial, (2,), dtype=jnp.float64)
-    z2 = jax.random.normal(k_measurement, (1,), dtype=jnp.float64)
-    return OrbitResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z1,
-                           jnp.sqrt(params.R) * z2)
+    """The noise of a reset from one draw ``z = jax.random.normal(key, (3,))``:
+    ``initial = sqrt(initial_state_cov) z[:2]``, ``measurement = sqrt(R) z[2:]``."""
+    z = jax.random.normal(key, (3,), dtype=jnp.float64)
+    return OrbitResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z[:2],
+                           jnp.sqrt(params.R) * z[2:])
 
 
 def orbit_noise(key: jax.Array, params: OrbitParams) -> OrbitNoise:
-    """The noise of a step: ``k_process, k_measurement = jax.random.split(key)``;
-    ``process = sqrt(Q) z₁`` (zero for the default Q = 0), ``measurement = sqrt(R) z₂``."""
-    k_process, k_measurement = jax.random.split(key)
-    z1 = jax.random.normal(k_process, (2,), dtype=jnp.float64)
-    z2 = jax.random.normal(k_measurement, (1,), dtype=jnp.float64)
-    return OrbitNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z1, jnp.sqrt(params.R) * z2)
+    """The noise of a step from one draw ``z = jax.random.normal(key, (3,))``:
+    ``process = sqrt(Q) z[:2]`` (zero for the default Q = 0), ``measurement = sqrt(R) z[2:]``
+    (one draw, not one per key split: on a CPU the threefry calls cost more than the
+    plant)."""
+    z = jax.random.normal(key, (3,), dtype=jnp.float64)
+    return OrbitNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z[:2], jnp.sqrt(params.R) * z[2:])
 
 
 def _symmetrize(P: jax.Array) -> jax.Array:

@@ -293,14 +293,16 @@ def test_vmap_over_drawn_mu_matches_the_numpy_env_row_by_row() -> None:
 def test_the_drawn_noise_follows_the_documented_splits() -> None:
     params = jax_params(Q=np.diag([1e-6, 4e-6]), initial_state_cov=np.diag([1e-3, 1e-4]))
     key = jax.random.key(9)
-    k_process, k_measurement = jax.random.split(key)
     noise = jorbit.orbit_noise(key, params)
-    z = np.asarray(jax.random.normal(k_process, (2,), dtype=jnp.float64))
-    # the square root of a diagonal Q is diagonal up to the eigenvectors' signs
-    np.testing.assert_allclose(np.abs(np.asarray(noise.process)),
-                               [1e-3 * abs(z[0]), 2e-3 * abs(z[1])], rtol=1e-15)
-    zy = np.asarray(jax.random.normal(k_measurement, (1,), dtype=jnp.float64))
-    np.testing.assert_allclose(np.asarray(noise.measurement), np.sqrt(1e-3) * zy, rtol=1e-15)
+    z = np.asarray(jax.random.normal(key, (3,), dtype=jnp.float64))
+    # the increments are S z with S the plant's square root (psd_sqrt: V Λ^½ from eigh — for
+    # a diagonal matrix a signed permutation of its diagonal's roots, hence the |·|)
+    for got, cov in ((noise.process, np.diag([1e-6, 4e-6])),
+                     (jorbit.orbit_reset_noise(key, params).initial, np.diag([1e-3, 1e-4]))):
+        np.testing.assert_allclose(np.abs(np.asarray(got)), np.abs(psd_sqrt(cov) @ z[:2]),
+                                   rtol=1e-15)
+    for got in (noise.measurement, jorbit.orbit_reset_noise(key, params).measurement):
+        np.testing.assert_allclose(np.asarray(got), np.sqrt(1e-3) * z[2:], rtol=1e-15)
     # step_env is step_with_noise on that noise
     env = jorbit.Orbit("ekf")
     _, state = env.reset_env(jax.random.key(1), params)
