@@ -12,9 +12,11 @@ The JAX twin of :class:`fir_gym.envs.orbit.OrbitEnv` (the numpy reference) seen 
 
 **Plant** (paper 000, eq (27), with a radial thrust ``a = action · thrust_max`` held over
 the interval): ``r ← r + v Δ``, ``v ← v + (a − μ / r²) Δ``, ``Δ = euler_dt``, repeated
-``substeps`` (M = 100) times per env step (:func:`orbit_interval`, a
-:func:`jax.lax.fori_loop`, mirrors :meth:`fir_gym.envs.orbit.OrbitDynamics.propagate`
-operation for operation, Jacobian product included), then ``+ w``, ``w ~ N(0, Q)``
+``substeps`` (M = 100) times per env step (:func:`orbit_plant_interval` and, with the
+Jacobian product, :func:`orbit_interval`: :func:`jax.lax.fori_loop` loops that mirror
+:meth:`fir_gym.envs.orbit.OrbitDynamics.propagate` operation for operation; for ``"ekf"``
+with the model's ``substeps`` the plant's, one loop runs both,
+:func:`orbit_plant_and_model_intervals`), then ``+ w``, ``w ~ N(0, Q)``
 (Q = 0 by default, as in the paper). Measurement, eq (28): ``y = r + v``, ``v ~ N(0, R)``.
 Reward ``−min((r' − r_ref)² + 0.01 action², cost_cap)``; termination when ``r' ∉ (r_min,
 r_max)``, paid ``−cost_cap (1 + steps left to max_steps_in_episode)``; a step whose new
@@ -211,6 +213,24 @@ def orbit_params(*, mu: float = TRUE_MU, R: float = 1e-3, Q: Any = None, euler_d
 
 
 # ---------------------------------------------------------------------------- pure functions
+def _substep(r: jax.Array, v: jax.Array, a: jax.Array, mu: jax.Array, d: jax.Array
+             ) -> tuple[jax.Array, jax.Array]:
+    """One Euler step of eq (27): ``r + v Δ``, ``v + (a − μ/r²) Δ``."""
+    return r + v * d, v + (a - mu / (r * r)) * d
+
+
+def _jacobian_substep(r: jax.Array, mu: jax.Array, d: jax.Array, J: tuple[jax.Array, ...]
+                      ) -> tuple[jax.Array, ...]:
+    """``J ← (I + Δ [[0, 1], [2μ/r³, 0]]) J`` at the substep's ``r`` (before it moves)."""
+    j11, j12, j21, j22 = J
+    g = 2.0 * mu / (r * r * r) * d
+    return j11 + d * j21, j12 + d * j22, j21 + g * j11, j22 + g * j12
+
+
+def _unroll(substeps: int) -> int:
+    return min(UNROLL, max(substeps, 1))
+
+
 def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Array,
                    substeps: int) -> tuple[jax.Array, jax.Array]:
     """One measurement interval of paper 000's eq (27): ``substeps`` Euler steps of
@@ -218,19 +238,45 @@ def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Arra
     ``a`` (a scalar, in physical units), and the interval's Jacobian, the product of the
     Euler Jacobians ``I + Δ [[0, 1], [2μ/r³, 0]]`` along the path. The operations of
     :meth:`fir_gym.envs.orbit.OrbitDynamics.propagate`, in its order."""
-    d = euler_dt
-
-    def substep(_: Any, carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
-        r, v, j11, j12, j21, j22 = carry
-        g = 2.0 * mu / (r * r * r) * d
-        j11, j12, j21, j22 = j11 + d * j21, j12 + d * j22, j21 + g * j11, j22 + g * j12
-        return r + v * d, v + (a - mu / (r * r)) * d, j11, j12, j21, j22
+    def body(_: Any, carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+        r, v, *J = carry
+        return (*_substep(r, v, a, mu, euler_dt), *_jacobian_substep(r, mu, euler_dt, tuple(J)))
 
     one, zero = jnp.ones_like(x[0]), jnp.zeros_like(x[0])
-    r, v, j11, j12, j21, j22 = jax.lax.fori_loop(0, substeps, substep,
+    r, v, j11, j12, j21, j22 = jax.lax.fori_loop(0, substeps, body,
                                                  (x[0], x[1], one, zero, zero, one),
-                                                 unroll=min(UNROLL, max(substeps, 1)))
+                                                 unroll=_unroll(substeps))
     return jnp.stack([r, v]), jnp.array([[j11, j12], [j21, j22]])
+
+
+def orbit_plant_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Array,
+                         substeps: int) -> jax.Array:
+    """:func:`orbit_interval` without the Jacobian (the plant's map, ``OrbitDynamics.f``)."""
+    def body(_: Any, carry: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
+        return _substep(*carry, a, mu, euler_dt)
+
+    r, v = jax.lax.fori_loop(0, substeps, body, (x[0], x[1]), unroll=_unroll(substeps))
+    return jnp.stack([r, v])
+
+
+def orbit_plant_and_model_intervals(x: jax.Array, a: jax.Array, mu: jax.Array,
+                                    euler_dt: jax.Array, xf: jax.Array, af: jax.Array,
+                                    muf: jax.Array, euler_dtf: jax.Array, substeps: int
+                                    ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """:func:`orbit_plant_interval` of the plant and :func:`orbit_interval` of the filter's
+    model (from its estimate ``xf``, with its ``af, muf, euler_dtf``) in one loop, when both
+    take ``substeps`` Euler steps: the same numbers as the two loops, half the iterations.
+    Returns ``(x_next, xf_next, F)``."""
+    def body(_: Any, carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+        r, v, rf, vf, *J = carry
+        return (*_substep(r, v, a, mu, euler_dt), *_substep(rf, vf, af, muf, euler_dtf),
+                *_jacobian_substep(rf, muf, euler_dtf, tuple(J)))
+
+    one, zero = jnp.ones_like(xf[0]), jnp.zeros_like(xf[0])
+    r, v, rf, vf, j11, j12, j21, j22 = jax.lax.fori_loop(
+        0, substeps, body, (x[0], x[1], xf[0], xf[1], one, zero, zero, one),
+        unroll=_unroll(substeps))
+    return jnp.stack([r, v]), jnp.stack([rf, vf]), jnp.array([[j11, j12], [j21, j22]])
 
 
 def _psd_sqrt(M: jax.Array) -> jax.Array:
@@ -366,8 +412,14 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
         u_in = jnp.reshape(jnp.asarray(action, dtype=jnp.float64), (1,))
         u = jnp.clip(u_in, -1.0, 1.0)
         x = state.x
-        x_det, _ = orbit_interval(x, u[0] * params.thrust_max, params.mu, params.euler_dt,
-                                  params.substeps)
+        a, a_model = u[0] * params.thrust_max, u[0] * params.nominal_thrust_max
+        fused = self.kind == "ekf" and params.substeps == params.nominal_substeps
+        if fused:            # the plant's and the model's Euler loops as one (same numbers)
+            x_det, xp, F = orbit_plant_and_model_intervals(
+                x, a, params.mu, params.euler_dt, state.filter_x, a_model, params.nominal_mu,
+                params.nominal_euler_dt, params.substeps)
+        else:
+            x_det = orbit_plant_interval(x, a, params.mu, params.euler_dt, params.substeps)
         x_next = x_det + noise.process
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
@@ -394,9 +446,9 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure}
         if self.kind == "ekf":
-            xp, F = orbit_interval(state.filter_x, u[0] * params.nominal_thrust_max,
-                                   params.nominal_mu, params.nominal_euler_dt,
-                                   params.nominal_substeps)
+            if not fused:
+                xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,
+                                       params.nominal_euler_dt, params.nominal_substeps)
             Pp = _symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
             new = ekf_watch(new, *ekf_update(xp, Pp, y, params.nominal_R), params)
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
