@@ -1,7 +1,7 @@
 """The optional extras: which ``pip install`` brings back a missing package.
 
 fir-gym's core (plants, estimators, ``fir-gym reproduce``) needs only its dependencies;
-training, Dask, videos and the filterpy references come with extras
+training, Dask, videos, the filterpy references and the JAX backend come with extras
 (``pyproject.toml``'s ``[project.optional-dependencies]``). :func:`install_hint` turns
 the name of a missing module into the command that installs it, so an error can say
 what fixes it instead of ``No module named 'torch'``.
@@ -18,6 +18,7 @@ INSTALL = {extra: f'{command} (in the fir-gym checkout)' for extra, command in {
     "bench": 'pip install ".[bench]"',
     "docs": 'pip install ".[docs]"',
     "dataset": 'pip install ".[dataset]"',
+    "jax": 'pip install ".[jax]"',
 }.items()}
 
 #: top-level module -> (the package's name, the extra that installs it)
@@ -35,6 +36,9 @@ MODULES = {
     "mkdocs": ("MkDocs", "docs"),
     "minari": ("Minari", "dataset"),
     "h5py": ("h5py", "dataset"),
+    "jax": ("JAX", "jax"),
+    "jaxlib": ("jaxlib", "jax"),
+    "gymnax": ("gymnax", "jax"),
 }
 
 

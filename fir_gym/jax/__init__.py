@@ -18,13 +18,15 @@ Environments: :class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000,
 
 from __future__ import annotations
 
+from fir_gym._extras import MissingExtra, install_hint
+
 try:
     import gymnax  # noqa: F401
     import jax
-except ImportError as error:          # pragma: no cover - exercised without the extra
-    raise ImportError(
-        f"fir_gym.jax needs the optional extra 'jax' ({error.name} is missing): "
-        'pip install ".[jax]" in the fir-gym checkout') from error
+except ImportError as error:          # exercised without the extra (tests/jax/test_jax_boundary.py)
+    # (jax's own ImportError for a missing jaxlib names no module: the hint is JAX's)
+    raise MissingExtra("fir_gym.jax: " + str(install_hint(error.name) or install_hint("jax"))
+                       ) from None
 
 jax.config.update("jax_enable_x64", True)
 

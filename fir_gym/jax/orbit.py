@@ -397,7 +397,11 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
     # ------------------------------------------------------------------ step
     def step_env(self, key: jax.Array, state: OrbitState, action: Any, params: OrbitParams
                  ) -> tuple[jax.Array, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
-        return self.step_with_noise(state, action, orbit_noise(key, params), params)
+        obs, state, reward, terminated, info = self.step_with_noise(
+            state, action, orbit_noise(key, params), params)
+        # gymnax's rule: transitions are detached unless gradients were asked for
+        obs, state = self._apply_transition_gradient_policy(obs, state)
+        return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: OrbitState, action: Any, noise: OrbitNoise,
                         params: OrbitParams
