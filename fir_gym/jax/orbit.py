@@ -7,8 +7,11 @@ The JAX twin of :class:`fir_gym.envs.orbit.OrbitEnv` (the numpy reference) seen 
 * ``"measurement"``: the raw measurement ``[r + noise]`` (the plant's own observation);
 * ``"ekf"``: the extended Kalman filter's estimate ``x̂`` of ``[r, v]``
   (:class:`~fir_gym.wrappers.EstimatorObservation` with
-  :class:`~fir_gym.estimators.extended.ExtendedKalmanFilter` and ``observation="estimate"``);
-  the filter's mean, covariance and divergence watch live in :class:`OrbitState`.
+  :class:`~fir_gym.estimators.extended.ExtendedKalmanFilter`); the filter's mean, covariance
+  and divergence watch live in :class:`OrbitState`. As there, ``observation`` may instead be
+  ``"estimate+covariance"`` (a dict: ``estimate`` and ``covariance``, the upper triangle of
+  ``P`` row by row, ``[P11, P12, P22]``) or ``"estimate+measurement"`` (``estimate`` and
+  ``measurement``).
 
 **Plant** (paper 000, eq (27), with a radial thrust ``a = action · thrust_max`` held over
 the interval): ``r ← r + v Δ``, ``v ← v + (a − μ / r²) Δ``, ``Δ = euler_dt``, repeated
@@ -83,6 +86,9 @@ NOMINAL_MU = 19.91
 STATE_LIMIT = 1e150
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
+#: what the ``"ekf"`` kind observes (``OBSERVATION_KINDS`` of
+#: :mod:`fir_gym.wrappers.estimator_observation`)
+OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
 #: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
 SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
                        "nonfinite_reward")
@@ -344,7 +350,8 @@ def ekf_prior(params: OrbitParams) -> tuple[jax.Array, jax.Array]:
 # ---------------------------------------------------------------------------- the environment
 class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
     """``fir_gym/Orbit-v0`` as a gymnax environment observing ``kind`` (see the module
-    docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default).
+    docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default, observing
+    ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
 
     ``reset_env(key, params)`` and ``step_env(key, state, action, params)`` draw their noise
     from ``key`` (:func:`orbit_reset_noise`, :func:`orbit_noise`) and call the pure
@@ -355,12 +362,15 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
     ``estimation_error``, ``estimator_diverged`` and ``nis``.
     """
 
-    def __init__(self, kind: str = "ekf") -> None:
+    def __init__(self, kind: str = "ekf", observation: str = "estimate") -> None:
         super().__init__()
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
+        if observation not in OBSERVATIONS or (kind != "ekf" and observation != "estimate"):
+            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'ekf' kind (and "
+                             f"is not an option of the others); got {observation!r} for {kind!r}")
         require_x64()
-        self.kind = kind
+        self.kind, self.observation = kind, observation
 
     @property
     def default_params(self) -> OrbitParams:
@@ -375,11 +385,11 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
         return 1
 
     # ------------------------------------------------------------------ reset
-    def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[jax.Array, OrbitState]:
+    def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[Any, OrbitState]:
         return self.reset_with_noise(orbit_reset_noise(key, params), params)
 
     def reset_with_noise(self, noise: OrbitResetNoise, params: OrbitParams
-                         ) -> tuple[jax.Array, OrbitState]:
+                         ) -> tuple[Any, OrbitState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``,
         ``y = r + noise.measurement``; the EKF (for ``"ekf"``) consumes ``y`` from its prior."""
         require_x64()
@@ -396,7 +406,7 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
 
     # ------------------------------------------------------------------ step
     def step_env(self, key: jax.Array, state: OrbitState, action: Any, params: OrbitParams
-                 ) -> tuple[jax.Array, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
+                 ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
             state, action, orbit_noise(key, params), params)
         # gymnax's rule: transitions are detached unless gradients were asked for
@@ -405,12 +415,13 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
 
     def step_with_noise(self, state: OrbitState, action: Any, noise: OrbitNoise,
                         params: OrbitParams
-                        ) -> tuple[jax.Array, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
+                        ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of :class:`~fir_gym.envs.orbit.OrbitEnv`
         (and, for ``"ekf"``, the EKF step of
-        :class:`~fir_gym.wrappers.EstimatorObservation`), without Python branches.
+        :class:`~fir_gym.wrappers.EstimatorObservation`); its only Python branches are on
+        static things (the kind, the numbers of substeps), none on data.
         """
         require_x64()
         u_in = jnp.reshape(jnp.asarray(action, dtype=jnp.float64), (1,))
@@ -461,19 +472,33 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
 
     # ------------------------------------------------------------------ views
     def get_obs(self, state: OrbitState, params: OrbitParams | None = None,
-                key: jax.Array | None = None) -> jax.Array:
+                key: jax.Array | None = None) -> Any:
         if self.kind == "true":
             return state.x
         if self.kind == "measurement":
             return state.y
+        if self.observation == "estimate+covariance":
+            P = state.filter_P
+            return {"estimate": state.filter_x,
+                    "covariance": jnp.stack([P[0, 0], P[0, 1], P[1, 1]])}
+        if self.observation == "estimate+measurement":
+            return {"estimate": state.filter_x, "measurement": state.y}
         return state.filter_x
 
     def is_terminated(self, state: OrbitState, params: OrbitParams) -> jax.Array:
         return state.terminated
 
-    def observation_space(self, params: OrbitParams) -> spaces.Box:
-        n = 1 if self.kind == "measurement" else 2
-        return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
+    def observation_space(self, params: OrbitParams) -> Any:
+        def box(n: int) -> spaces.Box:
+            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
+
+        if self.kind == "measurement":
+            return box(1)
+        if self.observation == "estimate+covariance":
+            return spaces.Dict({"estimate": box(2), "covariance": box(3)})
+        if self.observation == "estimate+measurement":
+            return spaces.Dict({"estimate": box(2), "measurement": box(1)})
+        return box(2)
 
     def action_space(self, params: OrbitParams | None = None) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (1,), jnp.float32)

@@ -44,20 +44,28 @@ class QueuedNormals:
         return z.copy()
 
 
-def numpy_env(kind: str, **kwargs: Any) -> gym.Env:
+def flat(obs: Any) -> np.ndarray:
+    """An observation as one float64 vector (a dict's entries in key order)."""
+    if isinstance(obs, dict):
+        return np.concatenate([np.asarray(obs[key], dtype=np.float64).reshape(-1)
+                               for key in sorted(obs)])
+    return np.asarray(obs, dtype=np.float64)
+
+
+def numpy_env(kind: str, observation: str = "estimate", **kwargs: Any) -> gym.Env:
     if kind == "ekf":
-        return gym.make("fir_gym/Orbit-v0", estimator="ekf", **kwargs)
+        return gym.make("fir_gym/Orbit-v0", estimator="ekf", observation=observation, **kwargs)
     if kind == "true":
         return gym.make("fir_gym/Orbit-v0", observation="true", **kwargs)
     return gym.make("fir_gym/Orbit-v0", **kwargs)
 
 
-def run_numpy(kind: str, actions: np.ndarray, rng: np.random.Generator, **kwargs: Any
-              ) -> dict[str, Any]:
+def run_numpy(kind: str, actions: np.ndarray, rng: np.random.Generator,
+              observation: str = "estimate", **kwargs: Any) -> dict[str, Any]:
     """An episode of the numpy env on the normals of ``rng``: what it returned, the noise
     increments it added (for the JAX env) and, for ``"ekf"``, the filter's mean and
     covariance after each step."""
-    env = numpy_env(kind, **kwargs)
+    env = numpy_env(kind, observation, **kwargs)
     plant = env.unwrapped
     normals = QueuedNormals()
     plant.np_random = normals                  # every draw of the plant comes from here
@@ -71,7 +79,7 @@ def run_numpy(kind: str, actions: np.ndarray, rng: np.random.Generator, **kwargs
     noisy = bool(np.any(process_sqrt))
     out: dict[str, Any] = {
         "reset_noise": (z0 @ initial_sqrt.T, zy * meas),
-        "process": [], "measurement": [], "obs": [np.array(obs, dtype=np.float64)],
+        "process": [], "measurement": [], "obs": [flat(obs)],
         "state": [info["state"]], "reward": [], "terminated": [], "truncated": [],
         "P": [], "diverged": [], "nis": []}
     estimator = env.get_wrapper_attr("estimator") if kind == "ekf" else None
@@ -90,7 +98,7 @@ def run_numpy(kind: str, actions: np.ndarray, rng: np.random.Generator, **kwargs
         assert not normals.queue, "a failed step: the test episodes avoid them"
         out["process"].append(zw @ process_sqrt.T if noisy else np.zeros(2))
         out["measurement"].append(zv * meas)
-        out["obs"].append(np.array(obs, dtype=np.float64))
+        out["obs"].append(flat(obs))
         out["state"].append(info["state"])
         out["reward"].append(reward)
         out["terminated"].append(terminated)
@@ -103,10 +111,10 @@ def run_numpy(kind: str, actions: np.ndarray, rng: np.random.Generator, **kwargs
             for key, value in out.items()}
 
 
-def run_jax(kind: str, actions: np.ndarray, ref: dict[str, Any], params: Any
-            ) -> dict[str, np.ndarray]:
+def run_jax(kind: str, actions: np.ndarray, ref: dict[str, Any], params: Any,
+            observation: str = "estimate") -> dict[str, np.ndarray]:
     """The JAX env on the numpy episode's noise: reset, then a scan of step_with_noise."""
-    env = jorbit.Orbit(kind)
+    env = jorbit.Orbit(kind, observation)
     n = len(ref["reward"])
     noise = jorbit.OrbitNoise(jnp.asarray(ref["process"]), jnp.asarray(ref["measurement"]))
     x0, y0 = ref["reset_noise"]
@@ -119,11 +127,12 @@ def run_jax(kind: str, actions: np.ndarray, ref: dict[str, Any], params: Any
         def body(state: Any, step: Any) -> Any:
             a, w = step
             obs, state, reward, terminated, _ = env.step_with_noise(state, a, w, params)
-            return state, (obs, state.x, reward, terminated, env.is_truncated(state, params),
+            return state, (flat_jax(obs), state.x, reward, terminated,
+                           env.is_truncated(state, params),
                            state.filter_x, state.filter_P, state.diverged, state.nis)
 
         _, trace = jax.lax.scan(body, state, (actions, noise))
-        return (obs0, state), trace
+        return (flat_jax(obs0), state), trace
 
     (obs0, s0), trace = rollout(noise, jnp.asarray(actions[:n]))
     obs, x, reward, terminated, truncated, fx, fP, diverged, nis = map(np.asarray, trace)
@@ -134,6 +143,13 @@ def run_jax(kind: str, actions: np.ndarray, ref: dict[str, Any], params: Any
             "P": np.concatenate([np.asarray(s0.filter_P)[None], fP]),
             "diverged": np.concatenate([[bool(s0.diverged)], diverged]),
             "nis": np.concatenate([[float(s0.nis)], nis])}
+
+
+def flat_jax(obs: Any) -> Any:
+    """:func:`flat` inside a trace."""
+    if isinstance(obs, dict):
+        return jnp.concatenate([jnp.reshape(obs[key], (-1,)) for key in sorted(obs)])
+    return obs
 
 
 def relative_error(got: np.ndarray, want: np.ndarray) -> float:
@@ -203,6 +219,21 @@ def test_an_episode_matches_the_numpy_env(kind: str, case: str) -> None:
     assert max(errors.values()) <= RTOL, errors
     if kind == "ekf":
         assert nis_error <= RTOL
+
+
+@pytest.mark.parametrize("observation", ["estimate+covariance", "estimate+measurement"])
+def test_the_ekf_kind_observes_what_estimator_observation_does(observation: str) -> None:
+    """The dict observations of EstimatorObservation: estimate with the upper triangle of P,
+    or with the measurement, over an episode of the paper's plant."""
+    actions = hover_actions(1000, 8)
+    ref = run_numpy("ekf", actions, np.random.default_rng(3), observation=observation)
+    got = run_jax("ekf", actions, ref, jax_params(), observation=observation)
+    assert got["obs"].shape == ref["obs"].shape == (1001, 5 if "covariance" in observation else 3)
+    error = relative_error(got["obs"], ref["obs"])
+    print(f"ekf/{observation}: max relative error of the observation {error:.2e}")
+    assert error <= RTOL
+    space = jorbit.Orbit("ekf", observation).observation_space(jax_params())
+    assert sorted(space.spaces) == sorted(("estimate", observation.split("+")[1]))
 
 
 def test_the_filter_sees_the_measurement_the_plant_returns() -> None:
@@ -329,6 +360,8 @@ def test_float64_throughout() -> None:
     assert jorbit.Orbit("measurement").observation_space(env.default_params).shape == (1,)
     with pytest.raises(ValueError, match="kind"):
         jorbit.Orbit("ukf")
+    with pytest.raises(ValueError, match="observation"):
+        jorbit.Orbit("true", "estimate+covariance")
 
 
 def test_x64_turned_off_later_is_refused() -> None:
