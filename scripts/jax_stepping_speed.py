@@ -14,6 +14,8 @@ Needs the ``jax`` extra::
 
     python scripts/jax_stepping_speed.py                 # 2048 envs x 200 steps
     python scripts/jax_stepping_speed.py --quick
+    python scripts/jax_stepping_speed.py --modes step step_env step_with_noise \
+        --prng threefry2x32 rbg
 """
 
 from __future__ import annotations
@@ -38,17 +40,25 @@ def policy(obs: np.ndarray) -> np.ndarray:
     return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
 
 
-def jax_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32"
-             ) -> tuple[float, float]:
+#: what a JAX step is: gymnax's ``step`` (noise drawn, auto-reset: what training runs),
+#: ``step_env`` (noise drawn, no auto-reset) or ``step_with_noise`` (zero noise given: the
+#: plant and the filter alone)
+MODES = ("step", "step_env", "step_with_noise")
+
+
+def jax_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
+             mode: str = "step") -> tuple[float, float]:
     """(env-steps/s of the jitted, vmapped Orbit+EKF env, compile seconds); ``prng`` is the
-    keys' implementation (JAX's default ``threefry2x32``, or ``rbg``/``unsafe_rbg``)."""
+    keys' implementation (JAX's default ``threefry2x32``, or ``rbg``/``unsafe_rbg``), ``mode``
+    one of :data:`MODES`."""
     import jax
     import jax.numpy as jnp
 
-    from fir_gym.jax.orbit import Orbit
+    from fir_gym.jax.orbit import Orbit, OrbitNoise
 
     env = Orbit("ekf")
     params = env.default_params
+    zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
 
     def one(key: Any) -> Any:
         k_reset, k_steps = jax.random.split(key)
@@ -57,7 +67,12 @@ def jax_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32"
         def body(carry: Any, key: Any) -> Any:
             obs, state = carry
             action = jnp.clip(HOVER - GAIN * (obs[:1] - R_REF), -1.0, 1.0)
-            obs, state, reward, _, _, _ = env.step(key, state, action, params)
+            if mode == "step":
+                obs, state, reward, _, _, _ = env.step(key, state, action, params)
+            elif mode == "step_env":
+                obs, state, reward, _, _ = env.step_env(key, state, action, params)
+            else:
+                obs, state, reward, _, _ = env.step_with_noise(state, action, zero, params)
             return (obs, state), reward
 
         (_, state), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
@@ -111,6 +126,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--prng", nargs="+", default=["threefry2x32"],
                         choices=["threefry2x32", "rbg", "unsafe_rbg"],
                         help="JAX key implementation(s) to time (default threefry2x32)")
+    parser.add_argument("--modes", nargs="+", default=["step"], choices=MODES,
+                        help="JAX step(s) to time (default: gymnax's step, with auto-reset)")
     parser.add_argument("--quick", action="store_true", help="256 envs, 50 steps, 2 reps")
     args = parser.parse_args(argv)
     if args.quick:
@@ -124,12 +141,14 @@ def main(argv: list[str] | None = None) -> None:
         print(f"numpy native vector env + VectorEstimatorObservation(ekf), {batch:5d} envs: "
               f"{rates[batch]:12,.0f} env-steps/s")
     best_batch = max(rates, key=lambda b: rates[b])
-    for prng in args.prng:
-        jax_steps, compile_s = jax_rate(args.envs, args.steps, args.reps, prng)
-        print(f"JAX Orbit(ekf), jit(vmap) over {args.envs} envs, lax.scan of {args.steps} "
-              f"steps, {prng} keys: {jax_steps:12,.0f} env-steps/s (compile {compile_s:.1f} s)")
-        print(f"ratio JAX ({prng}) / best numpy ({best_batch} envs, "
-              f"{rates[best_batch]:,.0f} env-steps/s): {jax_steps / rates[best_batch]:.2f}")
+    print(f"JAX Orbit(ekf), jit(vmap) over {args.envs} envs, lax.scan of {args.steps} steps; "
+          f"best numpy: {best_batch} envs, {rates[best_batch]:,.0f} env-steps/s")
+    for mode in args.modes:
+        for prng in args.prng if mode != "step_with_noise" else args.prng[:1]:
+            jax_steps, compile_s = jax_rate(args.envs, args.steps, args.reps, prng, mode)
+            keys = f", {prng} keys" if mode != "step_with_noise" else ""
+            print(f"  {mode}{keys}: {jax_steps:12,.0f} env-steps/s, ratio JAX / best numpy "
+                  f"{jax_steps / rates[best_batch]:.2f} (compile {compile_s:.1f} s)")
     print(f"load average after {load_average()}")
 
 
