@@ -217,7 +217,9 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
     Args:
         x: prior mean ``(n,)`` or ``(B, n)``. P: prior covariance.
         y: measurement ``(m,)`` or ``(B, m)``.
-        H: ``(m, n)`` or ``(B, m, n)``. R: ``(m, m)`` or ``(B, m, m)``.
+        H: ``(m, n)`` or ``(B, m, n)``. R: ``(m, m)`` or ``(B, m, m)``. For a one-state,
+            one-output system ``H`` and ``R`` may be numbers (so may ``F`` and ``Q`` of
+            :func:`kf_predict`).
 
     Raises:
         ValueError: on a shape mismatch, or when ``S = H P Hᵀ + R`` is not
@@ -227,9 +229,14 @@ def kf_update(x: ArrayLike, P: ArrayLike, y: ArrayLike, H: ArrayLike, R: ArrayLi
     n_b, n = x_.shape
     y_ = np.asarray(y, dtype=np.float64)
     H_ = np.asarray(H, dtype=np.float64)
-    m = H_.shape[-2] if H_.ndim >= 2 else -1
+    if H_.ndim == 0 and n == 1:                  # a scalar H of a one-state system: 1 x 1
+        H_ = H_.reshape(1, 1)
+    if H_.ndim < 2:
+        raise ValueError(f"H must have shape (m, {n})" + ("" if single else f" or ({n_b}, m, {n})")
+                         + f"; got shape {H_.shape}")
+    m = H_.shape[-2]
     if y_.shape != ((m,) if single else (n_b, m)):
-        raise ValueError(f"y must have shape ({m},) to match H" if single else
+        raise ValueError(f"y must have shape ({m},) to match H; got {y_.shape}" if single else
                          f"y must have shape ({n_b}, {m}) to match x and H; got {y_.shape}")
     H_ = _matrix_arg("H", H_, (m, n), n_b, single)
     R_ = _matrix_arg("R", R, (m, m), n_b, single)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.stats
+from compiled_paths import on_path
 
 from fir_gym.estimators import LinearModel, StateSpaceModel, TimeVaryingLinearModel
 from fir_gym.estimators.kalman import (
@@ -87,8 +88,11 @@ def test_steady_state_shortcut_equals_full_recursion():
     np.testing.assert_allclose(a.P, b.P, rtol=1e-12, atol=1e-15)
 
 
-def test_time_varying_convention():
-    """Prediction into x[k] uses matrices(k-1)'s A, B, Q; the update at k uses C(k), R(k)."""
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
+def test_time_varying_convention(path):
+    """Prediction into x[k] uses matrices(k-1)'s A, B, Q; the update at k uses C(k), R(k) — on
+    the numpy reference and on the compiled twin (mutation testing found the reference's
+    index untested: the run took the twin)."""
     rng = np.random.default_rng(4)
     As = [rng.normal(size=(2, 2)) * 0.7 for _ in range(8)]
     Cs = [rng.normal(size=(1, 2)) for _ in range(8)]
@@ -106,7 +110,9 @@ def test_time_varying_convention():
         S = Cs[k] @ P @ Cs[k].T + Rs[k]
         K = np.linalg.solve(S, Cs[k] @ P).T
         x, P = x + K @ (y - Cs[k] @ x), (np.eye(2) - K @ Cs[k]) @ P
-        np.testing.assert_allclose(kf.step(y, u), x, rtol=1e-10, atol=1e-12)
+        with on_path(path):
+            estimate = kf.step(y, u)
+        np.testing.assert_allclose(estimate, x, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(kf.P, P, rtol=1e-9, atol=1e-12)
 
 
@@ -170,6 +176,31 @@ def test_kf_update_pure_function_and_nis():
     np.testing.assert_allclose(Pp, 4 * P + np.eye(3))
 
 
+def test_kf_pure_functions_take_scalars_for_a_one_state_system():
+    """A scalar ``F``, ``Q``, ``H``, ``R`` stands for the 1 x 1 matrix (mutation testing found
+    the rule untested): the scalar textbook recursion."""
+    x, P, F, Q, H, R, y = 0.5, 2.0, 0.9, 0.1, 1.5, 0.4, 1.2
+    xp, Pp = kf_predict([x], [[P]], F, Q)
+    np.testing.assert_allclose(xp, [F * x])
+    np.testing.assert_allclose(Pp, [[F * P * F + Q]])
+    x1, P1, info = kf_update(xp, Pp, [y], H, R)
+    S = H * Pp[0, 0] * H + R
+    K = Pp[0, 0] * H / S
+    np.testing.assert_allclose(info.S, [[S]])
+    np.testing.assert_allclose(x1, [xp[0] + K * (y - H * xp[0])])
+    np.testing.assert_allclose(P1, [[(1 - K * H) ** 2 * Pp[0, 0] + K * R * K]])
+
+
+def test_kf_pure_functions_name_the_batched_shape_they_accept():
+    """A batch's wrong matrix is refused with both shapes it could have had."""
+    x, P = np.zeros((3, 2)), np.stack([np.eye(2)] * 3)
+    with pytest.raises(ValueError, match=r"F must have shape \(2, 2\) or \(3, 2, 2\); got "
+                                         r"shape \(3, 3\)"):
+        kf_predict(x, P, np.eye(3), np.eye(2))
+    with pytest.raises(ValueError, match=r"F must have shape \(2, 2\); got shape \(3, 3\)$"):
+        kf_predict(x[0], P[0], np.eye(3), np.eye(2))
+
+
 def test_kf_update_rejects_singular_S_and_bad_shapes():
     with pytest.raises(ValueError, match="positive definite"):
         kf_update(np.zeros(2), np.zeros((2, 2)), [1.0], [[1.0, 0.0]], [[0.0]])
@@ -177,6 +208,10 @@ def test_kf_update_rejects_singular_S_and_bad_shapes():
         kf_update(np.zeros(2), np.eye(3), [1.0], [[1.0, 0.0]], [[1.0]])
     with pytest.raises(ValueError, match="H must"):
         kf_update(np.zeros(2), np.eye(2), [1.0], [[1.0, 0.0, 0.0]], [[1.0]])
+    with pytest.raises(ValueError, match=r"H must have shape \(m, 2\); got shape \(2,\)"):
+        kf_update(np.zeros(2), np.eye(2), [1.0], [1.0, 0.0], [[1.0]])
+    with pytest.raises(ValueError, match=r"H must have shape \(m, 2\) or \(3, m, 2\)"):
+        kf_update(np.zeros((3, 2)), np.stack([np.eye(2)] * 3), np.ones((3, 1)), 1.0, [[1.0]])
     with pytest.raises(ValueError, match="R must"):
         kf_update(np.zeros(2), np.eye(2), [1.0], [[1.0, 0.0]], np.eye(2))
 
