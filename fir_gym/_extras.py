@@ -39,6 +39,7 @@ MODULES = {
     "jax": ("JAX", "jax"),
     "jaxlib": ("jaxlib", "jax"),
     "gymnax": ("gymnax", "jax"),
+    "rejax": ("rejax", "jax"),
 }
 
 

@@ -1,0 +1,510 @@
+"""PPO on a :mod:`fir_gym.jax` environment: every seed of one (plant, kind) in one program.
+
+The JAX twin of ``fir-gym train`` (:func:`fir_gym.training.train`) for the plants and kinds
+:data:`SUPPORTED` lists: rejax's PPO (``rejax.PPO``, which takes a gymnax environment
+instance) with the shipped recipe of ``fir_gym/training/hyperparams/ppo.yml``
+(:func:`recipe` reads it through :meth:`fir_gym.training.RunConfig.settings`, so
+``steps``, ``n_envs`` and ``algo_kwargs`` override it as they do for stable-baselines3),
+trained for all seeds at once: ``jax.jit(jax.vmap(one_seed))(keys)``, one compiled program.
+JAX's persistent compilation cache (:func:`enable_compilation_cache`; the folder
+``$FIR_GYM_JAX_CACHE``, else ``$XDG_CACHE_HOME/fir-gym/jax``, else ``~/.cache/fir-gym/jax``)
+keeps it on disk, so a second run of the same (plant, kind, recipe, seeds count) loads it
+instead of compiling.
+
+**rejax as used here.** rejax 0.1.3 is written for gymnax 0.0.x, whose ``step`` returned
+``(obs, state, reward, done, info)``; gymnax 1.0 returns ``terminated`` and ``truncated``
+apart. :class:`Gymnax0` adapts the environment (``done = terminated | truncated``).
+:class:`SB3LikePPO` subclasses ``rejax.PPO`` where it differs from stable-baselines3's
+PPO in a way that changes learning: one gradient-norm clip (``optax.clip_by_global_norm``;
+rejax clips each gradient *element* with ``optax.clip``), Adam's ``eps = 1e-5`` (SB3's),
+an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), the value loss
+unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``) and observations
+(and rewards) normalised then clipped to ``±clip_obs`` (``±clip_reward``) as
+``VecNormalize`` does.
+
+**What still differs from stable-baselines3** (:data:`UNMATCHED`): separate Adam states and
+separate gradient-norm clips for the actor and the critic (SB3: one optimiser over one
+summed loss; with separate networks only the clip differs); flax's default (LeCun normal)
+initialisation instead of SB3's orthogonal one; no bootstrap of truncated episodes (SB3's
+PPO adds ``γ V(final obs)`` at a time limit; gymnax's ``done`` ends the return there — at
+γ = 0.99 over 1000-step episodes a small effect); the minibatches must divide the
+rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one).
+
+**Returns** are what :func:`fir_gym.training.evaluate` reports: the undiscounted sum of the
+plant's raw reward over whole episodes, the policy deterministic (the Gaussian's mean,
+clipped to the action box), observations through the run's final normalisation
+statistics. The evaluation episodes are the same for every seed and checkpoint (keys from
+``eval_seed``, 10 000 as ``fir-gym evaluate``'s default seed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fir_gym._extras import require
+
+require("jax", "gymnax", "rejax")
+
+import gymnax.environments.environment as gymnax_env  # noqa: E402
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import optax  # noqa: E402
+from flax import linen as nn  # noqa: E402
+from flax import struct  # noqa: E402
+from flax.linen.initializers import constant  # noqa: E402
+from flax.training.train_state import TrainState  # noqa: E402
+from rejax import PPO  # noqa: E402
+from rejax.algos.algorithm import register_init  # noqa: E402
+from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
+from rejax.networks import MLP, GaussianPolicy  # noqa: E402
+
+from . import orbit as orbit_module  # noqa: E402  (after fir_gym.jax turned x64 on)
+
+#: the env ids and kinds the JAX backend trains
+SUPPORTED: dict[str, tuple[str, ...]] = {"fir_gym/Orbit-v0": orbit_module.KINDS}
+#: the parts of the recipe not matched (the module docstring says why)
+UNMATCHED = (
+    "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
+    "optimiser, one clip over both)",
+    "initialisation: flax's LeCun normal (SB3: orthogonal, gains sqrt(2), 0.01, 1)",
+    "no bootstrap of truncated episodes (SB3 adds gamma V(final obs) at the time limit)",
+)
+#: the algorithm settings the translation understands (stable-baselines3's PPO names)
+KNOWN_ALGO_KWARGS = ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma",
+                     "gae_lambda", "clip_range", "ent_coef", "vf_coef", "max_grad_norm",
+                     "policy_kwargs", "normalize_advantage", "clip_range_vf")
+#: stable-baselines3's PPO defaults for what the YAML leaves out
+SB3_DEFAULTS = {"vf_coef": 0.5, "max_grad_norm": 0.5, "net_arch": (64, 64),
+                "activation": "tanh", "log_std_init": 0.0}
+#: VecNormalize's defaults
+VECNORMALIZE_DEFAULTS = {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0,
+                         "clip_reward": 10.0, "gamma": 0.99, "epsilon": 1e-8}
+ADAM_EPS = 1e-5
+CACHE_ENV = "FIR_GYM_JAX_CACHE"
+
+
+def supported_line() -> str:
+    """One line naming what the JAX backend trains."""
+    return "; ".join(f"{env_id} with kind {', '.join(kinds)}" for env_id, kinds in
+                     SUPPORTED.items())
+
+
+def check_supported(env_id: str, kind: str, observation: str = "estimate") -> None:
+    """Refuse, in one line, a plant, kind or observation the JAX backend does not train."""
+    if env_id not in SUPPORTED or kind not in SUPPORTED[env_id]:
+        raise ValueError(f"the jax backend trains {supported_line()} (PPO); not {env_id} "
+                         f"with kind {kind}")
+    if observation != "estimate":
+        raise ValueError(f"the jax backend observes the estimate only (rejax's networks take "
+                         f"one array); not --observation {observation}")
+
+
+# ---------------------------------------------------------------------------- the recipe
+@dataclass(frozen=True)
+class Recipe:
+    """The PPO settings in rejax's names, translated from stable-baselines3's."""
+
+    steps: int                    # asked for; trained: iterations * rollout
+    num_envs: int
+    num_steps: int
+    num_minibatches: int
+    num_epochs: int
+    learning_rate: float
+    gamma: float
+    gae_lambda: float
+    clip_eps: float
+    ent_coef: float
+    vf_coef: float
+    max_grad_norm: float
+    hidden_layer_sizes: tuple[int, ...]
+    activation: str
+    log_std_init: float
+    normalize_observations: bool
+    normalize_rewards: bool
+    clip_obs: float
+    clip_reward: float
+
+    @property
+    def rollout(self) -> int:
+        return self.num_envs * self.num_steps
+
+    @property
+    def iterations(self) -> int:
+        """PPO iterations: as SB3, rollouts until at least ``steps`` (the last one whole)."""
+        return max(1, math.ceil(self.steps / self.rollout))
+
+
+def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
+           n_envs: int | None = None, algo_kwargs: dict[str, Any] | None = None,
+           hyperparams: str | None = None) -> Recipe:
+    """The shipped (or ``hyperparams``) PPO recipe of ``env_id`` in rejax's terms.
+
+    Read through :meth:`fir_gym.training.RunConfig.settings`, so the overrides and the
+    clamps (a rollout no longer than the budget) are the SB3 backend's. Refuses settings it
+    cannot translate: an algorithm keyword it does not know, different actor and critic
+    layers, value clipping, advantages not normalised, a minibatch size that does not
+    divide the rollout.
+    """
+    from fir_gym.training.run import RunConfig
+
+    settings = RunConfig(env_id, "true", algo="ppo", steps=steps, n_envs=n_envs,
+                         algo_kwargs=dict(algo_kwargs or {}),
+                         hyperparams=hyperparams).settings()
+    algo = dict(settings["algo_kwargs"])
+    unknown = sorted(set(algo) - set(KNOWN_ALGO_KWARGS))
+    if unknown:
+        raise ValueError(f"the jax backend does not translate PPO setting(s) {unknown}; it "
+                         f"knows {list(KNOWN_ALGO_KWARGS)}")
+    if algo.get("clip_range_vf") is not None or not algo.get("normalize_advantage", True):
+        raise ValueError("the jax backend trains with clip_range_vf=None and normalised "
+                         "advantages (stable-baselines3's defaults)")
+    policy = dict(algo.get("policy_kwargs") or {})
+    for key in sorted(set(policy) - {"log_std_init", "net_arch", "activation_fn", "ortho_init"}):
+        raise ValueError(f"the jax backend does not translate policy_kwargs {key!r}")
+    arch = policy.get("net_arch", SB3_DEFAULTS["net_arch"])
+    if isinstance(arch, dict):
+        if list(arch.get("pi", [])) != list(arch.get("vf", [])):
+            raise ValueError("the jax backend's actor and critic have the same hidden layers; "
+                             f"got net_arch {arch}")
+        arch = arch.get("pi", [])
+    activation = policy.get("activation_fn", SB3_DEFAULTS["activation"])
+    if not isinstance(activation, str):                  # a torch.nn class (nn.Tanh)
+        activation = activation.__name__.lower()
+    n_envs_, n_steps = int(settings["n_envs"]), int(algo["n_steps"])
+    batch = int(algo["batch_size"])
+    if (n_envs_ * n_steps) % batch:
+        raise ValueError(f"the jax backend needs batch_size ({batch}) to divide the rollout "
+                         f"n_steps x n_envs ({n_steps} x {n_envs_})")
+    norm = settings["normalize"]
+    norm = None if norm is None else {**VECNORMALIZE_DEFAULTS, **norm}
+    return Recipe(
+        steps=int(settings["steps"]), num_envs=n_envs_, num_steps=n_steps,
+        num_minibatches=n_envs_ * n_steps // batch, num_epochs=int(algo.get("n_epochs", 10)),
+        learning_rate=float(algo.get("learning_rate", 3e-4)),
+        gamma=float(algo.get("gamma", 0.99)), gae_lambda=float(algo.get("gae_lambda", 0.95)),
+        clip_eps=float(algo.get("clip_range", 0.2)), ent_coef=float(algo.get("ent_coef", 0.0)),
+        vf_coef=float(algo.get("vf_coef", SB3_DEFAULTS["vf_coef"])),
+        max_grad_norm=float(algo.get("max_grad_norm", SB3_DEFAULTS["max_grad_norm"])),
+        hidden_layer_sizes=tuple(int(n) for n in arch), activation=str(activation),
+        log_std_init=float(policy.get("log_std_init", SB3_DEFAULTS["log_std_init"])),
+        normalize_observations=bool(norm and norm["norm_obs"]),
+        normalize_rewards=bool(norm and norm["norm_reward"]),
+        clip_obs=float(norm["clip_obs"]) if norm else math.inf,
+        clip_reward=float(norm["clip_reward"]) if norm else math.inf)
+
+
+# ---------------------------------------------------------------------------- rejax, adapted
+class Gymnax0(gymnax_env.Environment):
+    """A gymnax 1.0 environment seen through gymnax 0.0.x's ``step`` (what rejax unpacks):
+    ``(obs, state, reward, terminated | truncated, info)``."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__()
+        self.env = env
+
+    def __hash__(self) -> int:               # a static argument of jit: by the wrapped env
+        return hash((Gymnax0, id(self.env)))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Gymnax0) and other.env is self.env
+
+    @property
+    def default_params(self) -> Any:
+        return self.env.default_params
+
+    def step(self, key: Any, state: Any, action: Any, params: Any = None) -> Any:
+        obs, state, reward, terminated, truncated, info = self.env.step(key, state, action,
+                                                                         params)
+        return obs, state, reward, terminated | truncated, info
+
+    def reset(self, key: Any, params: Any = None) -> Any:
+        return self.env.reset(key, params)
+
+    def observation_space(self, params: Any) -> Any:
+        return self.env.observation_space(params)
+
+    def action_space(self, params: Any = None) -> Any:
+        return self.env.action_space(params)
+
+
+class Policy(GaussianPolicy):
+    """rejax's Gaussian policy with SB3's ``log_std_init`` and a deterministic action."""
+
+    log_std_init: float = 0.0
+
+    def setup(self) -> None:
+        self.features = MLP(self.hidden_layer_sizes, self.activation)
+        self.action_mean = nn.Dense(self.action_dim)
+        self.action_log_std = self.param("action_log_std", constant(self.log_std_init),
+                                         (self.action_dim,))
+
+    def mean_action(self, obs: Any) -> Any:
+        mean = self.action_mean(self.features(obs))
+        return jnp.clip(mean, self.action_range[0], self.action_range[1])
+
+
+class SB3LikePPO(PPO):
+    """``rejax.PPO`` closer to stable-baselines3's (module docstring)."""
+
+    clip_obs: float = struct.field(pytree_node=False, default=math.inf)
+    clip_reward: float = struct.field(pytree_node=False, default=math.inf)
+
+    @register_init
+    def initialize_network_params(self, rng: Any) -> dict[str, Any]:
+        rng, rng_actor, rng_critic = jax.random.split(rng, 3)
+        obs = jnp.empty([1, *self.env.observation_space(self.env_params).shape])
+        actor_params = self.actor.init(rng_actor, obs, rng_actor)
+        critic_params = self.critic.init(rng_critic, obs)
+        tx = optax.chain(optax.clip_by_global_norm(self.max_grad_norm),
+                         optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS))
+        return {"actor_ts": TrainState.create(apply_fn=(), params=actor_params, tx=tx),
+                "critic_ts": TrainState.create(apply_fn=(), params=critic_params, tx=tx)}
+
+    @register_init
+    def initialize_obs_rms_state(self, rng: Any) -> dict[str, Any]:
+        # float64 (VecNormalize's RunningMeanStd; rejax's float32 breaks the scan under x64)
+        shape = self.env.observation_space(self.env_params).shape
+        return {"obs_rms_state": RMSState(mean=jnp.zeros(shape), var=jnp.ones(shape),
+                                          count=jnp.asarray(1e-4))}
+
+    @register_init
+    def initialize_reward_rms_state(self, rng: Any) -> dict[str, Any]:
+        return {"rew_rms_state": RewardRMSState(
+            mean=jnp.zeros(()), var=jnp.ones(()), count=jnp.asarray(1e-4),
+            returns=jnp.zeros(self.num_envs))}
+
+    def normalize_obs(self, rms_state: Any, x: Any) -> Any:
+        return jnp.clip(super().normalize_obs(rms_state, x), -self.clip_obs, self.clip_obs)
+
+    def normalize_rew(self, rms_state: Any, r: Any) -> Any:
+        return jnp.clip(super().normalize_rew(rms_state, r), -self.clip_reward,
+                        self.clip_reward)
+
+    def update_critic(self, ts: Any, batch: Any) -> Any:
+        def loss(params: Any) -> Any:        # SB3: vf_coef * mse, no value clipping
+            value = self.critic.apply(params, batch.trajectories.obs)
+            return self.vf_coef * jnp.mean(jnp.square(value - batch.targets))
+
+        grads = jax.grad(loss)(ts.critic_ts.params)
+        return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
+
+
+def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None
+             ) -> tuple[Any, Any]:
+    """``(gymnax env, params)`` of a supported plant and kind."""
+    check_supported(env_id, kind)
+    return orbit_module.Orbit(kind), orbit_module.orbit_params(**(env_kwargs or {}))
+
+
+def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:
+    """The PPO of ``rec`` on ``env`` (rejax's ``create``, then the SB3-like policy)."""
+    algo = SB3LikePPO.create(
+        env=Gymnax0(env), env_params=params, num_envs=rec.num_envs, num_steps=rec.num_steps,
+        num_minibatches=rec.num_minibatches, num_epochs=rec.num_epochs,
+        learning_rate=rec.learning_rate, gamma=rec.gamma, gae_lambda=rec.gae_lambda,
+        clip_eps=rec.clip_eps, ent_coef=rec.ent_coef, vf_coef=rec.vf_coef,
+        max_grad_norm=rec.max_grad_norm, normalize_observations=rec.normalize_observations,
+        normalize_rewards=rec.normalize_rewards, reward_normalization_discount=rec.gamma,
+        clip_obs=rec.clip_obs, clip_reward=rec.clip_reward,
+        total_timesteps=rec.iterations * rec.rollout, skip_initial_evaluation=True,
+        agent_kwargs={"activation": rec.activation,
+                      "hidden_layer_sizes": rec.hidden_layer_sizes})
+    space = env.action_space(params)
+    actor = Policy(int(np.prod(space.shape)), (space.low, space.high),
+                   rec.hidden_layer_sizes, algo.actor.activation, log_std_init=rec.log_std_init)
+    return algo.replace(actor=actor)
+
+
+# ---------------------------------------------------------------------------- evaluation
+def evaluate_policy(algo: SB3LikePPO, ts: Any, keys: Any) -> Any:
+    """Undiscounted raw returns of the deterministic policy, one episode per key (each a
+    full episode: ``max_steps_in_episode`` steps, masked after its end)."""
+    env, params = algo.env, algo.env_params
+
+    def episode(key: Any) -> Any:
+        reset_key, key = jax.random.split(key)
+        obs, state = env.reset(reset_key, params)
+
+        def step(carry: Any, step_key: Any) -> Any:
+            obs, state, total, done = carry
+            seen = obs
+            if algo.normalize_observations:
+                seen = algo.normalize_obs(ts.obs_rms_state, obs)
+            action = algo.actor.apply(ts.actor_ts.params, seen[None], method="mean_action")[0]
+            obs, state, reward, finished, _ = env.step(step_key, state, action, params)
+            total = total + jnp.where(done, 0.0, jnp.squeeze(reward))
+            return (obs, state, total, done | finished), None
+
+        steps = jax.random.split(key, params.max_steps_in_episode)
+        (_, _, total, _), _ = jax.lax.scan(step, (obs, state, jnp.zeros(()), False), steps)
+        return total
+
+    return jax.vmap(episode)(keys)
+
+
+def _segments(iterations: int, checkpoints: int) -> tuple[int, int, int]:
+    """``(k, per, tail)``: ``k`` checkpoints every ``per`` iterations, then ``tail`` more."""
+    k = max(1, min(checkpoints, iterations))
+    per = iterations // k
+    return k, per, iterations - k * per
+
+
+def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_episodes: int,
+                     episodes: int, eval_seed: int) -> Any:
+    """The function of one seed's key: ``(final train state, curve returns (k,
+    curve_episodes), final returns (episodes,))``."""
+    k, per, tail = _segments(rec.iterations, checkpoints)
+    curve_keys = jax.random.split(jax.random.PRNGKey(eval_seed), curve_episodes)
+    final_keys = jax.random.split(jax.random.PRNGKey(eval_seed), episodes)
+
+    def iterate(ts: Any, n: int) -> Any:
+        return jax.lax.fori_loop(0, n, lambda _, ts: algo.train_iteration(ts), ts)
+
+    def one_seed(key: Any) -> Any:
+        ts = algo.init_state(key)
+
+        def checkpoint(ts: Any, _: Any) -> Any:
+            ts = iterate(ts, per)
+            return ts, evaluate_policy(algo, ts, curve_keys)
+
+        ts, curve = jax.lax.scan(checkpoint, ts, None, k)
+        if tail:
+            ts = iterate(ts, tail)
+        return ts, curve, evaluate_policy(algo, ts, final_keys)
+
+    return one_seed
+
+
+# ---------------------------------------------------------------------------- the cache
+def cache_dir() -> Path:
+    """``$FIR_GYM_JAX_CACHE``, else ``$XDG_CACHE_HOME/fir-gym/jax``, else
+    ``~/.cache/fir-gym/jax``."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "fir-gym" / "jax"
+
+
+def enable_compilation_cache(folder: str | Path | None = None) -> Path:
+    """Turn on JAX's persistent compilation cache in ``folder`` (default :func:`cache_dir`)
+    for every program (no minimum compile time or size): a process-wide JAX setting."""
+    path = Path(folder) if folder is not None else cache_dir()
+    path.mkdir(parents=True, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return path
+
+
+# ---------------------------------------------------------------------------- training
+@dataclass
+class JaxTraining:
+    """The result of :func:`train`: per-seed learning curves and final returns."""
+
+    env_id: str
+    kind: str
+    seeds: list[int]
+    recipe: Recipe
+    checkpoint_steps: list[int]               # env steps trained at each checkpoint
+    curves: list[list[float]]                 # [seed][checkpoint]: mean eval return
+    final_returns: list[list[float]]          # [seed][episode]
+    compile_seconds: float                    # lowering + compiling (or loading from cache)
+    train_seconds: float                      # running the compiled program
+    cache: str | None
+    train_state: Any = field(default=None, repr=False)   # the vmapped rejax state
+
+    @property
+    def per_seed(self) -> list[float]:
+        return [float(np.mean(r)) for r in self.final_returns]
+
+    @property
+    def iqm(self) -> float:
+        from scipy.stats import trim_mean
+
+        return float(trim_mean(np.asarray(self.per_seed), 0.25))
+
+    @property
+    def steps_trained(self) -> int:
+        return self.recipe.iterations * self.recipe.rollout
+
+    def to_dict(self) -> dict[str, Any]:
+        data = {k: v for k, v in asdict(self).items() if k != "train_state"}
+        data.update(per_seed=self.per_seed, iqm=self.iqm, steps_trained=self.steps_trained,
+                    unmatched=list(UNMATCHED), backend="jax")
+        return data
+
+
+def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None = None,
+          n_envs: int | None = None, algo_kwargs: dict[str, Any] | None = None,
+          env_kwargs: dict[str, Any] | None = None, hyperparams: str | None = None,
+          checkpoints: int = 10, curve_episodes: int = 8, episodes: int = 20,
+          eval_seed: int = 10_000, cache: str | Path | bool | None = True) -> JaxTraining:
+    """Train PPO on ``env_id`` observing ``kind`` for every seed in one compiled program.
+
+    ``seeds``: a list, or a count (``0..n-1``). ``checkpoints`` evaluations of
+    ``curve_episodes`` episodes along training make the curves, ``episodes`` at the end the
+    final returns (module docstring). ``cache``: ``True`` for :func:`cache_dir`, a folder,
+    or ``False``/``None`` for none (what is already on leaves JAX's setting as it is).
+    """
+    check_supported(env_id, kind)
+    seed_list = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if not seed_list:
+        raise ValueError("give at least one seed")
+    for name, value in (("checkpoints", checkpoints), ("curve_episodes", curve_episodes),
+                        ("episodes", episodes)):
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise ValueError(f"{name} must be a positive integer; got {value!r}")
+    folder = None
+    if cache:
+        folder = str(enable_compilation_cache(None if cache is True else cache))
+    rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
+                 hyperparams=hyperparams)
+    env, params = make_env(env_id, kind, env_kwargs)
+    algo = make_algorithm(env, params, rec)
+    program = jax.jit(jax.vmap(training_program(
+        algo, rec, checkpoints=checkpoints, curve_episodes=curve_episodes, episodes=episodes,
+        eval_seed=eval_seed)))
+    keys = jnp.stack([jax.random.PRNGKey(s) for s in seed_list])
+    start = time.perf_counter()
+    compiled = program.lower(keys).compile()
+    compiled_at = time.perf_counter()
+    ts, curve, final = jax.block_until_ready(compiled(keys))
+    done = time.perf_counter()
+    k, per, _ = _segments(rec.iterations, checkpoints)
+    return JaxTraining(
+        env_id=env_id, kind=kind, seeds=seed_list, recipe=rec,
+        checkpoint_steps=[(i + 1) * per * rec.rollout for i in range(k)],
+        curves=np.asarray(curve).mean(axis=-1).tolist(),
+        final_returns=np.asarray(final).tolist(),
+        compile_seconds=compiled_at - start, train_seconds=done - compiled_at, cache=folder,
+        train_state=ts)
+
+
+def save(result: JaxTraining, out: str | Path) -> Path:
+    """Write a run folder: ``results.json`` (:meth:`JaxTraining.to_dict`), ``code_version.txt``
+    and, per seed, ``seed<s>/policy.msgpack`` (the actor's and critic's parameters and the
+    observation normalisation statistics, flax-serialised)."""
+    from flax import serialization
+
+    from fir_gym.code_version import code_version
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "code_version.txt").write_text(code_version() + "\n")
+    (out / "results.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    ts = result.train_state
+    if ts is not None:
+        for i, seed in enumerate(result.seeds):
+            state = {"actor": ts.actor_ts.params, "critic": ts.critic_ts.params,
+                     "obs_rms": ts.obs_rms_state}
+            one = jax.tree.map(lambda x, i=i: np.asarray(x)[i], state)
+            (out / f"seed{seed}").mkdir(exist_ok=True)
+            (out / f"seed{seed}" / "policy.msgpack").write_bytes(serialization.to_bytes(one))
+    return out
