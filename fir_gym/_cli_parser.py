@@ -183,6 +183,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="training seed")
     p.add_argument("--hyperparams", default=None, metavar="YAML",
                    help="an RL Zoo hyperparameter file (default: the shipped one)")
+    p.add_argument("--backend", default="sb3", choices=["sb3", "jax"],
+                   help="sb3 (default): stable-baselines3 on the numpy plant; jax: rejax's PPO "
+                        "on fir_gym.jax (Orbit-v0 with kind true, measurement or ekf; needs "
+                        'the jax extra: pip install ".[jax]")')
+    p.add_argument("--seeds", type=positive_int, default=1,
+                   help="with --backend jax: train seeds SEED..SEED+N-1 in one compiled "
+                        "program (default: 1)")
     _add_training_options(p)
 
     p = command("evaluate", "evaluate a trained controller, or LQG/PID",

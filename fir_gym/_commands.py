@@ -164,6 +164,11 @@ def check_estimator_options(kind_kwargs: dict[str, Any]) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    if args.backend == "jax":
+        return train_jax(args)
+    if args.seeds != 1:
+        raise ValueError("--seeds trains several seeds in one program with --backend jax; "
+                         "the sb3 backend trains one (--seed), compare-controllers several")
     check_estimator_options(args.kind_kwargs)
     from .training import RunConfig, evaluate, kind_options, train
     from .training.compare import validate
@@ -185,10 +190,53 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def train_jax(args: argparse.Namespace) -> int:
+    """``fir-gym train --backend jax``: :func:`fir_gym.jax.train.train` for every seed at
+    once, the run folder written by :func:`fir_gym.jax.train.save`."""
+    from ._extras import require
+
+    require("jax", "gymnax", "rejax")                  # a missing extra: its one line
+    # fir_gym.jax is imported here only, when asked for (tests/jax/test_jax_boundary.py)
+    from .jax import train as jax_train
+
+    jax_train.check_supported(args.env, args.estimator, args.observation)
+    refused = {"--algo sac": args.algo != "ppo", "--kind-kwargs": bool(args.kind_kwargs),
+               "--checkpoint-freq": bool(args.checkpoint_freq), "--resume": args.resume,
+               "--tensorboard": bool(args.tensorboard)}
+    if any(refused.values()):
+        raise ValueError("the jax backend trains PPO with the plant's own filter and takes "
+                         "no " + ", ".join(k for k, v in refused.items() if v))
+    rec = jax_train.recipe(args.env, steps=args.steps, n_envs=args.n_envs,
+                           algo_kwargs=args.algo_kwargs, hyperparams=args.hyperparams)
+    checkpoints = max(1, rec.steps // args.eval_freq) if args.eval_freq else 10
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    with working(f"training {len(seeds)} seed(s) with jax", enabled=not args.no_progress):
+        result = jax_train.train(args.env, args.estimator, seeds, steps=args.steps,
+                                 n_envs=args.n_envs, algo_kwargs=args.algo_kwargs,
+                                 env_kwargs=args.env_kwargs, hyperparams=args.hyperparams,
+                                 checkpoints=checkpoints, episodes=args.episodes)
+    out = jax_train.save(result, args.out)
+    returns = [r for seed in result.final_returns for r in seed]
+    import statistics
+
+    spread = statistics.pstdev(returns) if len(returns) > 1 else 0.0
+    print(f"{args.env} observing {args.estimator}: return {statistics.fmean(returns):.4g} ± "
+          f"{spread:.3g} over {args.episodes} episodes x {len(seeds)} seed(s), IQM over seeds "
+          f"{result.iqm:.4g}; saved in {out}")
+    print(f"jax: compile {result.compile_seconds:.1f} s (cache {result.cache}), train "
+          f"{result.train_seconds:.1f} s for {result.steps_trained} steps x {len(seeds)} seeds",
+          file=sys.stderr)
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.model:
         if args.kind or args.env:
             raise ValueError("give --model (a run folder) or --env with --kind, not both")
+        if Path(args.model, "results.json").is_file() and not Path(args.model,
+                                                                   "run.json").is_file():
+            raise ValueError(f"--model {args.model} was trained with --backend jax: its "
+                             "returns are in its results.json (evaluate plays sb3 runs)")
         if not Path(args.model, "run.json").is_file():
             what = "does not exist" if not Path(args.model).exists() else "has no run.json"
             raise ValueError(f"--model {args.model} is not a run folder of `fir-gym train` "
