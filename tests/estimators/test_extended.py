@@ -161,3 +161,85 @@ def test_bad_input_and_registry():
         ekf.step([1.0])
     with pytest.raises(ValueError, match="u must have shape"):
         ekf.step([1.0, 1.0], u=[1.0, 2.0])
+
+
+# ---------------------------------------------------------------- from the mutation run
+# (docs/mutation.md: each test below kills mutants that survived the tests above)
+
+def gaussian_log_density(e: np.ndarray, S: np.ndarray) -> float:
+    """``log N(e; 0, S)`` written out."""
+    return float(-0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(2 * np.pi * S))))
+
+
+@pytest.mark.parametrize("kind", ["ekf", "lkf"])
+def test_the_log_likelihood_is_the_gaussian_density_of_the_innovation(kind):
+    """``info["log_likelihood"]`` of each step is ``log N(e; 0, S)`` of the textbook KF's
+    innovation on a linear model (where both filters are the KF)."""
+    rng = np.random.default_rng(5)
+    A, C = rng.normal(size=(2, 2)) * 0.6, rng.normal(size=(2, 2))
+    Q, R = np.eye(2) * 0.1, np.diag([0.5, 0.2])
+    flt = make_estimator(kind, LinearModel(A=A, C=C, Q=Q, R=R), x0=np.zeros(2), P0=np.eye(2))
+    x, P = np.zeros(2), np.eye(2)
+    for k in range(20):
+        y = rng.normal(size=2)
+        if k:
+            x, P = A @ x, A @ P @ A.T + Q
+        e, S = y - C @ x, C @ P @ C.T + R
+        K = np.linalg.solve(S, C @ P).T
+        x, P = x + K @ e, (np.eye(2) - K @ C) @ P @ (np.eye(2) - K @ C).T + K @ R @ K.T
+        flt.step(y)
+        assert flt.last_info["log_likelihood"] == pytest.approx(gaussian_log_density(e, S),
+                                                                rel=1e-10)
+
+
+@pytest.mark.parametrize("batch", [None, 3])
+def test_the_lkf_nominal_is_the_open_loop_trajectory(batch):
+    """``x_nominal``: ``None`` before the first step, then ``x0`` propagated through ``f`` with
+    the inputs alone (the measurements never move it), one row per system of a batch."""
+    model = pendulum_model()
+    x0 = np.array([0.5, 0.0]) if batch is None else np.array([[0.5, 0.0], [0.1, 0.2],
+                                                             [-0.3, 0.0]])
+    lkf = make_estimator("lkf", model, x0=x0, P0=np.eye(2) * 0.3)
+    assert lkf.x_nominal is None
+    rng = np.random.default_rng(6)
+    nominal = x0.copy()
+    for k in range(6):
+        shape = (2,) if batch is None else (batch, 2)
+        y, u = rng.normal(size=shape), rng.normal(size=shape[:-1] + (1,))
+        lkf.step(y, u)
+        if k:
+            nominal = model.f(nominal, u)
+        assert lkf.x_nominal.shape == x0.shape
+        np.testing.assert_allclose(lkf.x_nominal, nominal, rtol=1e-14, atol=1e-15)
+
+
+def test_an_ekf_whose_model_becomes_nonlinear_mid_run_continues_as_one_built_on_it():
+    """A batch started on a plain linear model (one shared covariance, the KF's shortcut)
+    whose model is replaced by a general one with the same dynamics continues exactly as an
+    EKF that had the general model from the start: the shared covariance becomes one per
+    system."""
+    rng = np.random.default_rng(8)
+    A, B, C = rng.normal(size=(2, 2)) * 0.6, rng.normal(size=(2, 1)), rng.normal(size=(1, 2))
+    Q, R = np.eye(2) * 0.1, np.array([[0.3]])
+    linear = LinearModel(A=A, B=B, C=C, Q=Q, R=R)
+    general = StateSpaceModel(f=lambda x, u: x @ A.T + u @ B.T, h=lambda x: x @ C.T,
+                              F=lambda x, u: np.broadcast_to(A, x.shape[:-1] + (2, 2)),
+                              H=lambda x: np.broadcast_to(C, x.shape[:-1] + (1, 2)),
+                              Q=Q, R=R, n_u=1)
+    switched = ExtendedKalmanFilter(linear, x0=np.zeros(2), P0=np.eye(2))
+    reference = ExtendedKalmanFilter(general, x0=np.zeros(2), P0=np.eye(2))
+    for k in range(12):
+        if k == 5:
+            switched.model = general
+        Y, U = rng.normal(size=(4, 1)), rng.normal(size=(4, 1))
+        np.testing.assert_allclose(switched.step(Y, U), reference.step(Y, U), rtol=1e-10,
+                                   atol=1e-12)
+        np.testing.assert_allclose(switched.P, reference.P, rtol=1e-10, atol=1e-12)
+
+
+def test_a_time_varying_model_is_refused_with_the_filter_that_takes_it():
+    from fir_gym.estimators import TimeVaryingLinearModel
+    tv = TimeVaryingLinearModel(A=lambda k: np.eye(2), C=lambda k: np.eye(1, 2), Q=np.eye(2),
+                                R=np.eye(1))
+    with pytest.raises(TypeError, match=r"time-free f/h .*use KalmanFilter"):
+        ExtendedKalmanFilter(tv)
