@@ -109,7 +109,8 @@ class SigmaPoints:
         x_ = np.asarray(x, dtype=np.float64)
         single = x_.ndim == 1
         X, P_ = (x_[None], np.asarray(P, float)[None]) if single else (x_, np.asarray(P, float))
-        if X.shape[-1] != self.n or P_.shape != (X.shape[0], self.n, self.n):
+        if (X.ndim != 2 or X.shape[-1] != self.n
+                or P_.shape != (X.shape[0], self.n, self.n)):
             raise ValueError(f"x and P must have shapes (n,), (n, n) with n = {self.n} "
                              f"(or a batch); got {x_.shape} and {np.shape(P)}")
         with np.errstate(invalid="ignore"):

@@ -164,3 +164,39 @@ def test_bad_input_and_registry():
     assert ukf.points.alpha == 0.5
     with pytest.raises(ValueError, match="y must have shape"):
         ukf.step(np.zeros(3))
+
+
+# ---------------------------------------------------------------- from the mutation run
+# (docs/mutation.md: each test below kills mutants that survived the tests above)
+
+def test_the_weights_and_unit_points_are_read_only():
+    """A sigma-point set is shared by every filter that uses it: its weights cannot be
+    changed by accident."""
+    for points in (MerweScaledSigmaPoints(3, 0.5, 2.0, 0.0), CubatureSigmaPoints(3)):
+        for a in (points.xi, points.Wm, points.Wc):
+            with pytest.raises(ValueError, match="read-only"):
+                a[0] = 1.0
+
+
+def test_sigma_points_refuse_a_mean_of_more_than_two_axes():
+    points = MerweScaledSigmaPoints(2, 0.5, 2.0, 0.0)
+    with pytest.raises(ValueError, match="x and P must have shapes"):
+        points.sigma_points(np.zeros((3, 2, 2)), np.stack([np.eye(2)] * 3))
+
+
+def test_a_non_model_is_refused_as_a_type_error():
+    with pytest.raises(TypeError, match="model"):
+        UnscentedKalmanFilter("not a model")
+
+
+def test_options_are_keyword_only_for_every_registered_estimator():
+    """``make_estimator(name, model, x0=..., ...)``: after the model every option is passed
+    by name, so a positional slip cannot land in the wrong option."""
+    import inspect
+
+    from fir_gym.estimators.registry import estimator_class, estimator_names
+    for name in estimator_names():
+        params = list(inspect.signature(estimator_class(name)).parameters.values())
+        assert params[0].kind in (params[0].POSITIONAL_ONLY, params[0].POSITIONAL_OR_KEYWORD), name
+        late = [p.name for p in params[1:] if p.kind not in (p.KEYWORD_ONLY, p.VAR_KEYWORD)]
+        assert not late, f"{name}: options not keyword-only: {late}"
