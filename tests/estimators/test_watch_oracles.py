@@ -151,3 +151,49 @@ def test_missing_measurements_in_a_run_of_steps_never_flag(path: str) -> None:
         for _ in range(3 * PATIENCE):
             est.step([np.nan])
             assert np.isnan(est.last_info["nis"]) and not est.diverged
+
+
+# ------------------------------------------------------- the windowed filters' one-step NIS
+# (from the mutation run, docs/mutation.md: every windowed-filter test measured one channel,
+# so the twin's 2 x 2 closed form, its symmetrisation and its Cholesky branch went untested)
+
+def textbook_innovation_nis(P, A, Qx, H, R, e, predict, valid):
+    """``eᵀ S⁻¹ e`` per system with ``S = H P⁻ Hᵀ + R``, ``P⁻ = A P Aᵀ + Qx`` (or ``P``),
+    by ``np.linalg.solve``; NaN where not valid or ``S`` is not positive definite."""
+    out = np.full(P.shape[0], np.nan)
+    for b in range(P.shape[0]):
+        Ab, Qb, Hb = (M[b] if M.shape[0] > 1 else M[0] for M in (A, Qx, H))
+        Pm = Ab @ P[b] @ Ab.T + Qb if predict[b] else P[b]
+        S = Hb @ Pm @ Hb.T + R
+        if valid[b] and np.all(np.linalg.eigvalsh(S) > 0):
+            out[b] = e[b] @ np.linalg.solve(S, e[b])
+    return out
+
+
+@pytest.mark.skipif(not TWINS, reason="the compiled twins are off in this run")
+@pytest.mark.parametrize("p", [1, 2, 3, 4])
+@pytest.mark.parametrize("shared", [True, False], ids=["shared A, Qx, H", "per-system"])
+def test_the_twins_innovation_nis_is_the_textbook_one(p: int, shared: bool) -> None:
+    from fir_gym.estimators._consistency import innovation_nis
+    rng = np.random.default_rng(10 * p + shared)
+    n_b, n = 6, 3
+    G = rng.normal(size=(n_b, n, n))
+    P = G @ G.mT + 0.1 * np.eye(n)
+    k = 1 if shared else n_b
+    A, H = rng.normal(size=(k, n, n)), rng.normal(size=(k, p, n))
+    Gq = rng.normal(size=(k, n, n))
+    Qx = 0.1 * Gq @ Gq.mT
+    Gr = rng.normal(size=(p, p))
+    R = Gr @ Gr.T + 0.2 * np.eye(p)
+    e = rng.normal(size=(n_b, p))
+    predict = np.array([True, False, True, True, False, True])
+    valid = np.array([True, True, False, True, True, True])
+    R_bad = -np.eye(p) * 1e3                           # S not positive definite
+    for R_, want_nan in ((R, ~valid), (R_bad, np.ones(n_b, bool))):
+        want = textbook_innovation_nis(P, A, Qx, H, R_, e, predict, valid)
+        np.testing.assert_array_equal(np.isnan(want), want_nan)
+        out = np.empty(n_b)
+        watch.innovation_nis(P, A, Qx, H, R_, e, predict, valid, out)
+        np.testing.assert_allclose(out, want, rtol=1e-10)
+        np.testing.assert_allclose(innovation_nis(P, A, Qx, H, R_, e, predict, valid), want,
+                                   rtol=1e-10)
