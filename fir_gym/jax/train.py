@@ -17,17 +17,18 @@ apart. :class:`Gymnax0` adapts the environment (``done = terminated | truncated`
 :class:`SB3LikePPO` subclasses ``rejax.PPO`` where it differs from stable-baselines3's
 PPO in a way that changes learning: one gradient-norm clip (``optax.clip_by_global_norm``;
 rejax clips each gradient *element* with ``optax.clip``), Adam's ``eps = 1e-5`` (SB3's),
-an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), the value loss
+an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), SB3's orthogonal
+initialisation (gains √2, 0.01 for the mean, 1 for the value; rejax: flax's LeCun normal,
+which starts the mean action far from 0), the value loss
 unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``) and observations
 (and rewards) normalised then clipped to ``±clip_obs`` (``±clip_reward``) as
 ``VecNormalize`` does.
 
 **What still differs from stable-baselines3** (:data:`UNMATCHED`): separate Adam states and
 separate gradient-norm clips for the actor and the critic (SB3: one optimiser over one
-summed loss; with separate networks only the clip differs); flax's default (LeCun normal)
-initialisation instead of SB3's orthogonal one; no bootstrap of truncated episodes (SB3's
-PPO adds ``γ V(final obs)`` at a time limit; gymnax's ``done`` ends the return there — at
-γ = 0.99 over 1000-step episodes a small effect); the minibatches must divide the
+summed loss; with separate networks only the clip differs); no bootstrap of truncated
+episodes (SB3's PPO adds ``γ V(final obs)`` at a time limit; gymnax's ``done`` ends the
+return there — at γ = 0.99 over 1000-step episodes a small effect); the minibatches must divide the
 rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one).
 
 **Returns** are what :func:`fir_gym.training.evaluate` reports: the undiscounted sum of the
@@ -63,7 +64,7 @@ from flax.training.train_state import TrainState  # noqa: E402
 from rejax import PPO  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
-from rejax.networks import MLP, GaussianPolicy  # noqa: E402
+from rejax.networks import GaussianPolicy  # noqa: E402
 
 from . import orbit as orbit_module  # noqa: E402  (after fir_gym.jax turned x64 on)
 
@@ -73,7 +74,6 @@ SUPPORTED: dict[str, tuple[str, ...]] = {"fir_gym/Orbit-v0": orbit_module.KINDS}
 UNMATCHED = (
     "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
     "optimiser, one clip over both)",
-    "initialisation: flax's LeCun normal (SB3: orthogonal, gains sqrt(2), 0.01, 1)",
     "no bootstrap of truncated episodes (SB3 adds gamma V(final obs) at the time limit)",
 )
 #: the algorithm settings the translation understands (stable-baselines3's PPO names)
@@ -168,6 +168,8 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
     policy = dict(algo.get("policy_kwargs") or {})
     for key in sorted(set(policy) - {"log_std_init", "net_arch", "activation_fn", "ortho_init"}):
         raise ValueError(f"the jax backend does not translate policy_kwargs {key!r}")
+    if policy.get("ortho_init", True) is not True:
+        raise ValueError("the jax backend initialises as SB3's ortho_init=True only")
     arch = policy.get("net_arch", SB3_DEFAULTS["net_arch"])
     if isinstance(arch, dict):
         if list(arch.get("pi", [])) != list(arch.get("vf", [])):
@@ -234,14 +236,48 @@ class Gymnax0(gymnax_env.Environment):
         return self.env.action_space(params)
 
 
+def _dense(features: int, gain: float) -> nn.Dense:
+    """A layer initialised as stable-baselines3's ``ortho_init``: orthogonal weights of
+    ``gain``, zero biases."""
+    return nn.Dense(features, kernel_init=nn.initializers.orthogonal(gain),
+                    bias_init=nn.initializers.zeros)
+
+
+class Features(nn.Module):
+    """SB3's MLP extractor: hidden layers with orthogonal weights of gain √2."""
+
+    hidden_layer_sizes: tuple[int, ...]
+    activation: Any
+
+    @nn.compact
+    def __call__(self, x: Any) -> Any:
+        x = x.reshape((x.shape[0], -1))
+        for size in self.hidden_layer_sizes:
+            x = self.activation(_dense(size, math.sqrt(2.0))(x))
+        return x
+
+
+class Critic(nn.Module):
+    """The value network: :class:`Features`, then one output of gain 1 (SB3's)."""
+
+    hidden_layer_sizes: tuple[int, ...]
+    activation: Any
+
+    @nn.compact
+    def __call__(self, obs: Any) -> Any:
+        x = Features(self.hidden_layer_sizes, self.activation)(obs)
+        return _dense(1, 1.0)(x).squeeze(1)
+
+
 class Policy(GaussianPolicy):
-    """rejax's Gaussian policy with SB3's ``log_std_init`` and a deterministic action."""
+    """rejax's Gaussian policy initialised as SB3's (:class:`Features`, the mean's layer of
+    gain 0.01, ``log_std`` = ``log_std_init``), with a deterministic action."""
 
     log_std_init: float = 0.0
 
     def setup(self) -> None:
-        self.features = MLP(self.hidden_layer_sizes, self.activation)
-        self.action_mean = nn.Dense(self.action_dim)
+        self.features = Features(tuple(self.hidden_layer_sizes), self.activation)
+        self.action_mean = _dense(self.action_dim, 0.01)
         self.action_log_std = self.param("action_log_std", constant(self.log_std_init),
                                          (self.action_dim,))
 
@@ -319,7 +355,8 @@ def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:
     space = env.action_space(params)
     actor = Policy(int(np.prod(space.shape)), (space.low, space.high),
                    rec.hidden_layer_sizes, algo.actor.activation, log_std_init=rec.log_std_init)
-    return algo.replace(actor=actor)
+    critic = Critic(rec.hidden_layer_sizes, algo.actor.activation)
+    return algo.replace(actor=actor, critic=critic)
 
 
 # ---------------------------------------------------------------------------- evaluation
