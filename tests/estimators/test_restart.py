@@ -7,6 +7,7 @@ never restarted.
 
 import numpy as np
 import pytest
+from compiled_paths import on_path
 
 from fir_gym.estimators import LinearModel, StateSpaceModel, make_estimator
 
@@ -35,8 +36,14 @@ CASES = [("kf", "linear"), ("ekf", "nonlinear"), ("ukf", "nonlinear"), ("lkf", "
 
 @pytest.mark.parametrize(("name", "model_name"), CASES)
 @pytest.mark.parametrize("batched_prior", [False, True])
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
 def test_restarted_system_equals_a_fresh_filter_and_others_are_untouched(name, model_name,
-                                                                         batched_prior):
+                                                                         batched_prior, path):
+    with on_path(path):
+        check_restart(name, model_name, batched_prior)
+
+
+def check_restart(name, model_name, batched_prior):
     model = models()[model_name]
     rng = np.random.default_rng(1)
     B, K, k_restart = 3, 12, 5
@@ -47,13 +54,14 @@ def test_restarted_system_equals_a_fresh_filter_and_others_are_untouched(name, m
     prior = {"x0": x0, "P0": P0} if batched_prior else {"x0": x0[0], "P0": P0[0]}
     batch = make_estimator(name, model, **prior)
     plain = make_estimator(name, model, **prior)
-    out, ref = [], []
+    out, ref, infos = [], [], []
     for k in range(K):
         if k == k_restart:
             batch.restart(np.array([False, True, False]))
         u = None if k == 0 else U[k]
         out.append(batch.step(Y[k], u))
         ref.append(plain.step(Y[k], u))
+        infos.append(batch.last_info)
     out, ref = np.array(out), np.array(ref)
     np.testing.assert_allclose(out[:, [0, 2]], ref[:, [0, 2]], rtol=0, atol=1e-12)
     # the reference is the same system in a fresh batch (the same arithmetic path: with
@@ -63,6 +71,11 @@ def test_restarted_system_equals_a_fresh_filter_and_others_are_untouched(name, m
     for k in range(k_restart, K):
         expected = fresh.step(Y[k], None if k == k_restart else U[k])[i]
         np.testing.assert_allclose(out[k, i], expected, rtol=0, atol=1e-12)
+        # and so do its NIS and log-likelihood (the restarted system's own, not the pass's)
+        for key in ("nis", "log_likelihood"):
+            if fresh.last_info.get(key) is not None:
+                np.testing.assert_allclose(infos[k][key][i], fresh.last_info[key][i],
+                                           rtol=1e-10, atol=1e-12, err_msg=key)
     np.testing.assert_allclose(batch.P[i], fresh.P[i], rtol=0, atol=1e-12)
 
 

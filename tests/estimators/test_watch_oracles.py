@@ -197,3 +197,23 @@ def test_the_twins_innovation_nis_is_the_textbook_one(p: int, shared: bool) -> N
         np.testing.assert_allclose(out, want, rtol=1e-10)
         np.testing.assert_allclose(innovation_nis(P, A, Qx, H, R_, e, predict, valid), want,
                                    rtol=1e-10)
+
+
+# ------------------------------------------------- the watch's arguments (from the mutation run)
+@pytest.mark.parametrize(("option", "value", "message"), [
+    ("nis_tail", 1.0, r"nis_tail must be in \(0, 1\); got 1.0"),
+    ("nis_tail", 1.5, r"nis_tail must be in \(0, 1\)"),
+    ("nis_patience", 2.5, "nis_patience"),
+])
+def test_the_watch_refuses_a_tail_outside_0_1_and_a_fractional_patience(option, value, message):
+    model = LinearModel(A=np.eye(2), C=[[1.0, 0.0]], Q=np.eye(2), R=[[1.0]])
+    with pytest.raises(ValueError, match=message):
+        KalmanFilter(model, **{option: value})
+
+
+def test_a_scalar_input_serves_a_one_input_model():
+    """``u`` may be a number when the model has one input: the same step as ``[u]``."""
+    model = LinearModel(A=np.eye(2), B=[[0.0], [1.0]], C=[[1.0, 0.0]], Q=np.eye(2), R=[[1.0]])
+    a, b = KalmanFilter(model), KalmanFilter(model)
+    a.step([0.3]), b.step([0.3])
+    np.testing.assert_array_equal(a.step([0.1], 0.5), b.step([0.1], [0.5]))
