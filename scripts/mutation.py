@@ -264,6 +264,18 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         "when it does not compile; equivalent when triaged as unable to change any result "
         "(its reason below). The kill rate is killed / (run − incompetent − equivalent), "
         "with its 95 % Wilson interval over the sample.", "",
+        "**Why cosmic-ray.** It mutates the module's own file in place and runs any test "
+        "command, which is what this repository's package-dir mapping needs: the strict "
+        "editable install serves `fir_gym.estimators` from `estimators/` itself, so a tool "
+        "that copies the tree and tests the copy (mutmut 3's `mutants/` folder) would test "
+        "the unmutated installed files. Its operators are filtered to the plausible slips of "
+        "numerical code, and a seeded sample of each module's mutants runs, so that every "
+        "module fits in about an hour on 2 cores (the script's docstring says which "
+        "operators and why).", "",
+        "**Run it.** `pip install \".[mutation]\"`, then `python scripts/mutation.py "
+        "[MODULE ...]` on a checkout nobody else is testing from (it edits the files while "
+        "it runs); `--results DIR` shares one results folder between two checkouts, each "
+        "with its own virtual environment, and `--table-only` writes this page from it.", "",
         "| module | kept | run | killed | survived | equivalent | incompetent | kill rate "
         "| 95 % interval | time |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|",
