@@ -102,8 +102,9 @@ def check_supported(env_id: str, kind: str, observation: str = "estimate") -> No
         raise ValueError(f"the jax backend trains {supported_line()} (PPO); not {env_id} "
                          f"with kind {kind}")
     if observation != "estimate":
-        raise ValueError(f"the jax backend observes the estimate only (rejax's networks take "
-                         f"one array); not --observation {observation}")
+        raise ValueError(f"the jax backend trains {supported_line()} (PPO), observing the "
+                         "estimate only (rejax's networks take one array); not --observation "
+                         f"{observation}")
 
 
 # ---------------------------------------------------------------------------- the recipe
