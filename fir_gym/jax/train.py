@@ -433,8 +433,13 @@ def cache_dir() -> Path:
 def enable_compilation_cache(folder: str | Path | None = None) -> Path:
     """Turn on JAX's persistent compilation cache in ``folder`` (default :func:`cache_dir`)
     for every program (no minimum compile time or size): a process-wide JAX setting."""
+    from jax.experimental.compilation_cache import compilation_cache
+
     path = Path(folder) if folder is not None else cache_dir()
     path.mkdir(parents=True, exist_ok=True)
+    if getattr(jax.config, "jax_compilation_cache_dir", None) not in (None, str(path)):
+        # JAX opens its cache once, at the first compile: another folder needs a reset
+        compilation_cache.reset_cache()
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)

@@ -195,6 +195,15 @@ def test_the_cache_folder_is_overridable(monkeypatch: pytest.MonkeyPatch, tmp_pa
     assert jt.cache_dir() == tmp_path / "x" / "fir-gym" / "jax"
 
 
+def test_the_compilation_cache_moves_to_another_folder(tmp_path: Path) -> None:
+    """JAX opens its cache once; a second folder in the same process still gets the
+    programs compiled after it."""
+    for i, name in enumerate(("a", "b")):
+        jt.enable_compilation_cache(tmp_path / name)
+        jax.jit(lambda x, i=i: x * (i + 7.25) + 1.0)(jnp.ones(3)).block_until_ready()
+        assert any((tmp_path / name).iterdir()), name
+
+
 # ---------------------------------------------------------------------------- the oracle
 def baseline_return(policy: str, episodes: int = 4) -> float:
     """The mean return of a zero-action or uniformly random policy on Orbit ``true``."""
