@@ -38,6 +38,11 @@ would then count as killed.
   unmutated callee (a gross mutant of ``estimators/compiled/linalg.py`` survived that way).
   Each of their mutants then compiles every kernel its tests use (a minute or two on 2
   cores), so they run ``cold-sample`` mutants instead of ``sample``;
+* ``twin-only``: the modules (glob patterns) that hold compiled code only; every other
+  module's tests run twice, with the compiled twins off (``FIR_GYM_NUMBA=0``: the numpy
+  reference steps) and on — with the twins on alone, a mutant of a numpy reference goes
+  unseen wherever the twin runs in its place (``estimators/_fir_bank.py``'s first run killed
+  3 of 20);
 * ``equivalent``: the mutants triaged as equivalent (they cannot change any result), each
   with its module, operator, mutated line and the reason; they leave the kill rate's
   denominator and are listed with their reason.
@@ -58,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import fnmatch
 import json
 import math
 import os
@@ -101,6 +107,8 @@ class Configuration:
     #: modules whose mutants run with numba's cache emptied, and their sample size
     cold_cache: list[str]
     cold_sample: int
+    #: modules (glob patterns) that are compiled code only: their tests run with the twins on
+    twin_only: list[str]
 
     def sample_size(self, module: str) -> int:
         return self.cold_sample if module in self.cold_cache else self.sample
@@ -147,21 +155,28 @@ def configuration(root: Path = ROOT) -> Configuration:
     return Configuration(modules, [str(p) for p in table["operators"]], int(table["sample"]),
                          int(table["seed"]), equivalent,
                          cold,
-                         int(table.get("cold-sample", table["sample"])))
+                         int(table.get("cold-sample", table["sample"])),
+                         [str(p) for p in table.get("twin-only", [])])
 
 
-def test_command(tests: list[str], cold_cache: Path | None = None) -> str:
+def test_command(tests: list[str], cold_cache: Path | None = None, both_paths: bool = True
+                 ) -> str:
     """The test command of a module (``-P``: the checkout's root stays off ``sys.path``).
 
-    With ``cold_cache``, numba's cache folder is emptied before the tests and used by them:
-    a cached kernel of another file that inlined a function of the mutated module would
-    otherwise run the unmutated code (numba checks only the kernel's own file's stamp).
+    ``both_paths``: the tests run twice, first with the compiled twins off
+    (``FIR_GYM_NUMBA=0``: every step takes the numpy reference, which is what a mutant of a
+    reference changes — with the twins on, the twin runs instead and the mutant goes
+    unseen), then as they are. With ``cold_cache``, numba's cache folder is emptied before
+    the tests and used by them: a cached kernel of another file that inlined a function of
+    the mutated module would otherwise run the unmutated code (numba checks only the
+    kernel's own file's stamp).
     """
     pytest = " ".join([sys.executable, "-P", "-m", "pytest", "-x", "-q", "-p",
                        "no:cacheprovider", *tests])
-    if cold_cache is None:
-        return pytest
-    return f"sh -c 'rm -rf {cold_cache} && NUMBA_CACHE_DIR={cold_cache} exec {pytest}'"
+    run = f"FIR_GYM_NUMBA=0 {pytest} && {pytest}" if both_paths else f"exec {pytest}"
+    if cold_cache is not None:
+        run = f"rm -rf {cold_cache} && export NUMBA_CACHE_DIR={cold_cache} && {run}"
+    return f"sh -c '{run}'"
 
 
 def baseline(module: str, command: str) -> float:
@@ -197,7 +212,8 @@ def run_module(module: str, config: Configuration, work: Path, commit: str) -> O
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome, WorkResult
 
     cold = module in config.cold_cache
-    command = test_command(config.modules[module], work / "numba-cold" if cold else None)
+    both = not any(fnmatch.fnmatch(module, pattern) for pattern in config.twin_only)
+    command = test_command(config.modules[module], work / "numba-cold" if cold else None, both)
     timeout = max(60.0, 5.0 * baseline(module, command))
     cr_config = work / "cosmic-ray.toml"
     session = work / f"{module.replace('/', '_')}.sqlite"
