@@ -173,8 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
     rl = 'Needs the rl extra: pip install torch==2.13.0 && pip install ".[rl]".'
-    p = command("train", "train a controller with stable-baselines3",
-                description="Train a controller with stable-baselines3 and evaluate it. " + rl)
+    p = command("train", "train a controller with stable-baselines3 (or JAX: --backend jax)",
+                description="Train a controller with stable-baselines3 and evaluate it. " + rl
+                + " --backend jax trains PPO on fir_gym.jax instead (Orbit-v0 only; the jax "
+                  "extra as well).")
     p.add_argument("--env", required=True,
                    help="environment id, e.g. fir_gym/VanDerPol-v0 (required)")
     p.add_argument("--estimator", "--kind", dest="estimator", default="true",
