@@ -169,6 +169,23 @@ def test_the_cli_refuses_what_the_jax_backend_does_not_train(
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("missing", ["jax", "rejax"])
+def test_the_cli_without_the_jax_extra_says_which_in_one_line(missing: str, tmp_path: Path
+                                                              ) -> None:
+    import subprocess
+    import sys
+
+    code = (f"import sys; sys.modules[{missing!r}] = None\n"
+            "from fir_gym.cli import main\n"
+            f"sys.exit(main(['train', '--backend', 'jax', '--env', {ORBIT!r}, "
+            f"'--out', {str(tmp_path / 'run')!r}]))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and 'pip install ".[jax]"' in done.stderr
+    assert ("rejax is missing" if missing == "rejax" else "JAX is missing") in done.stderr
+
+
 def test_the_cli_trains_and_writes_the_run_folder(tmp_path: Path, cache: Path,
                                                   monkeypatch: pytest.MonkeyPatch,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
