@@ -128,3 +128,40 @@ def test_terminates_when_the_body_reaches_the_planet():
 def test_invalid_parameters_raise(kwargs):
     with pytest.raises(ValueError, match="|".join(kwargs)):
         gym.make("fir_gym/Orbit-v0", **kwargs)
+
+
+# ---------------------------------------------------------------- from the mutation run
+# (docs/mutation.md: each test below kills mutants that survived the tests above)
+
+def test_reward_is_minus_the_saturated_tracking_and_thrust_cost():
+    """``r = −min((r' − r_ref)² + 0.01 a², cost_cap)``, the cap being that cost at the planet's
+    surface under full thrust, ``(r_ref − r_min)² + 0.01`` (the module docstring)."""
+    env = gym.make("fir_gym/Orbit-v0").unwrapped
+    env.reset(seed=3)
+    cap = (env.r_ref - env.r_min) ** 2 + 0.01 * 1.0 ** 2
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        a = rng.uniform(-1.0, 1.0, size=1)
+        _, reward, terminated, _, info = env.step(a)
+        if terminated:
+            break
+        cost = (info["state"][0] - env.r_ref) ** 2 + 0.01 * a[0] ** 2
+        assert reward == pytest.approx(-min(cost, cap), rel=1e-12)
+    # the crash pays the cap for the terminal step and every step it forgoes
+    crash = gym.make("fir_gym/Orbit-v0", initial_state=(1.5, -3.0)).unwrapped
+    crash.reset(seed=0)
+    for k in range(1, 200):
+        _, reward, terminated, _, _ = crash.step(np.array([-1.0]))
+        if terminated:
+            break
+    assert terminated
+    assert reward == pytest.approx(-cap * (1 + crash.max_episode_steps - k), rel=1e-12)
+
+
+def test_the_design_point_is_a_fixed_point_of_the_model():
+    """The LQG's operating point hovers: the model's interval map (the nominal μ it
+    believes) leaves ``(x*, u*)`` where it is, at ``r = r_ref``, ``v = 0``."""
+    env = gym.make("fir_gym/Orbit-v0").unwrapped
+    point = env.design_point()
+    assert point.x[0] == env.r_ref and point.x[1] == 0.0
+    np.testing.assert_allclose(env.model.f(point.x, point.u), point.x, rtol=0, atol=1e-12)
