@@ -56,6 +56,23 @@ def record(x, P, limits=LIMITS):
     return FilterState.of_batch(x, P, limits.copy())
 
 
+@pytest.mark.parametrize("wrong", ["F", "H", "R"])
+def test_predict_update_refuses_a_matrix_with_neither_one_row_nor_one_per_system(wrong):
+    """F, H and R each have one row for all systems or one per system; another count is
+    refused, whatever the others are (mutation testing found the check's ``and`` could be an
+    ``or``)."""
+    rng = np.random.default_rng(0)
+    B, n, m = 3, 2, 1
+    x, P = rng.normal(size=(B, n)), spd(rng, (B,), n)
+    rows = {"F": 1, "H": 1, "R": 1, wrong: 2}
+    F = np.broadcast_to(np.eye(n), (rows["F"], n, n)).copy()
+    H = np.ones((rows["H"], m, n))
+    R = np.broadcast_to(np.eye(m), (rows["R"], m, m)).copy()
+    with pytest.raises(ValueError, match="a row per system"):
+        ck.predict_update(record(x, P), x, F, np.eye(n), np.zeros((B, m)), np.zeros((B, m)),
+                          H, R, np.ones(B, bool), np.ones(B, bool))
+
+
 @pytest.mark.parametrize(("n", "m"), [(1, 1), (2, 1), (3, 2), (4, 2), (5, 3), (6, 4)])
 @pytest.mark.parametrize("shared", [False, True])
 def test_predict_update_equals_predict_covariance_then_update_kernel(n, m, shared):
