@@ -17,8 +17,8 @@ would then count as killed.
 
 ``pyproject.toml``'s ``[tool.fir-gym.mutation]`` says what is mutated and how:
 
-* ``modules``: each module with the test files that cover it, so a module is run against
-  its own tests, not the whole suite;
+* ``modules``: each module with the test files (or pytest node ids, ``file::test``) that
+  cover it, so a module is run against its own tests, not the whole suite;
 * ``operators``: the mutation operators kept (regular expressions on cosmic-ray's operator
   names) — the plausible slips of a numerical code (``+``/``−``, ``*``/``/``, ``**``→``*``,
   a comparison's boundary or its negation, a dropped minus or ``not``, a number off by one,
@@ -143,7 +143,7 @@ def configuration(root: Path = ROOT) -> Configuration:
     table = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["fir-gym"]["mutation"]
     modules = {str(m): [str(t) for t in tests] for m, tests in table["modules"].items()}
     for module, tests in modules.items():
-        missing = [p for p in (module, *tests) if not (root / p).exists()]
+        missing = [p for p in (module, *tests) if not (root / p.split("::")[0]).exists()]
         if missing:
             raise SystemExit(f"[tool.fir-gym.mutation] names files that do not exist: {missing}")
     equivalent = [Equivalent(**e) for e in table.get("equivalent", [])]
