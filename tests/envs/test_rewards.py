@@ -1,0 +1,59 @@
+"""Each plant's reward against the cost its docstring states, computed here from the true
+state after the step (``info["state"]``) and the action: a sign or a weight slipped in a
+``_reward`` would otherwise go unseen (mutation testing found one in every plant's reward,
+docs/mutation.md). Orbit's is in test_orbit.py."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import fir_gym  # noqa: F401  (registers the ids)
+
+
+def rollout(env_id: str, steps: int = 40, seed: int = 1, **kwargs):
+    """``(state after, action, reward)`` of each step of a random-action episode."""
+    env = gym.make(env_id, **kwargs).unwrapped
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(steps):
+        a = rng.uniform(-1.0, 1.0, size=1)
+        _, reward, terminated, _, info = env.step(a)
+        if terminated:
+            break
+        out.append((info["state"], a[0], reward))
+    return env, out
+
+
+def test_uncertain_oscillator_reward():
+    """``−min((x1' − setpoint)² + 1e-3 a², 2.25)``."""
+    env, steps = rollout("fir_gym/UncertainOscillator-v0")
+    assert steps
+    for x, a, reward in steps:
+        cost = (x[0] - env.setpoint) ** 2 + 1e-3 * a * a
+        assert reward == pytest.approx(-min(cost, 2.25), rel=1e-12, abs=1e-15)
+
+
+def test_van_der_pol_reward():
+    """``−min((x1'² + x2'²)/4 + 0.01 a², state_bound²/2 + 0.01)``."""
+    env, steps = rollout("fir_gym/VanDerPol-v0")
+    assert steps
+    cap = env.state_bound ** 2 / 2 + 0.01
+    for x, a, reward in steps:
+        cost = (x[0] ** 2 + x[1] ** 2) / 4 + 0.01 * a * a
+        assert reward == pytest.approx(-min(cost, cap), rel=1e-12, abs=1e-15)
+
+
+def test_carrier_motion_reward():
+    """``−min(((x1' − a c_max) / σ1)², 100)``: the residual of the compensated deck over a
+    constant σ1 (so ``−reward / (x1' − a c_max)²`` is one number over the episode), and the
+    cap where the residual is huge."""
+    env, steps = rollout("fir_gym/CarrierMotion-v0", c_max=0.7)
+    assert steps
+    scale = [-reward / (x[0] - a * 0.7) ** 2 for x, a, reward in steps]
+    np.testing.assert_allclose(scale, scale[0], rtol=1e-9)
+    env.reset(seed=0, options={"state": [1e3, 0.0]})
+    _, reward, *_ = env.step(np.array([0.0]))
+    assert reward == -100.0
