@@ -179,27 +179,35 @@ def test_batch_in_lockstep_equals_separate_filters(model) -> None:
         assert np.abs(together[:, b] - alone).max() <= 1e-12 * max(1.0, np.abs(alone).max())
 
 
-def test_missing_measurement_uses_the_rest_of_the_window() -> None:
+@pytest.mark.parametrize("form", ["filter", "predictor"])
+def test_missing_measurement_uses_the_rest_of_the_window(form: str) -> None:
+    """The predictor form (window ``y[k−L..k−1]``) is the filter estimate at ``k − 1`` over
+    that window, predicted one step (mutation testing found its masked path untested)."""
     model = lti(9, rho=0.9, p=2)
     _, ys, us = simulate(model, 12, seed=4)
     ys = ys.copy()
     ys[9, 1] = np.nan                                      # one output missing at k = 9
-    f = FIRFilter(model, horizon=6, nan_policy="skip")
+    f = FIRFilter(model, horizon=6, nan_policy="skip", form=form)
     est = run(f, ys, us)
-    # oracle: the stacked formula for the window 6..11 with that measurement's row removed
+    last = 11 if form == "filter" else 10                  # the window's newest measurement
+    first = last - 5
+    # oracle: the stacked formula for the window first..last with that measurement removed
     win = model_window(model, 6, 6)
     sw = stacked_window(win)
     keep = np.ones(12, bool)
-    keep[(9 - 6) * 2 + 1:(9 - 6) * 2 + 2] = False          # whole y[9]: the filter skips it
-    keep[(9 - 6) * 2] = False
+    keep[(9 - first) * 2 + 1:(9 - first) * 2 + 2] = False  # whole y[9]: the filter skips it
+    keep[(9 - first) * 2] = False
     Ct, Gt = sw.Ct[keep], sw.Gt[keep]
     Pi = Gt @ sw.Qbd @ Gt.T + sw.Rbd[np.ix_(keep, keep)]
     U = np.linalg.solve(Pi, Ct).T
     FiU = np.linalg.solve(U @ Ct, U)
     V = sw.M @ sw.Qbd @ Gt.T @ np.linalg.inv(Pi)
     S = sw.Phi @ FiU + V - V @ Ct @ FiU
-    Y = (ys[6:12].ravel() - sw.Dt @ us[6:12].ravel())[keep]
-    assert np.allclose(est[11], S @ Y + sw.MB @ us[6:12].ravel(), atol=1e-10)
+    Y = (ys[first:last + 1].ravel() - sw.Dt @ us[first:last + 1].ravel())[keep]
+    want = S @ Y + sw.MB @ us[first:last + 1].ravel()
+    if form == "predictor":
+        want = model.A @ want + model.B @ us[10]
+    assert np.allclose(est[11], want, atol=1e-10)
     assert not f.last_info["rank_deficient"]
 
 
