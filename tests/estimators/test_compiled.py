@@ -408,22 +408,27 @@ def test_without_numba_jit_returns_the_python_function(monkeypatch):
 @pytest.mark.parametrize("p", [1, 2, 3])
 @pytest.mark.parametrize("per_window", [False, True])
 @pytest.mark.parametrize("noise", [False, True])
-def test_window_bank_kernels_equal_the_numpy_bank(n, p, per_window, noise):
+@pytest.mark.parametrize("size", ["40x6", "2x2 scaled"])
+def test_window_bank_kernels_equal_the_numpy_bank(n, p, per_window, noise, size):
     """Time and measurement updates and the read-outs (filter, smoother, with a prior) of a
     40-system, 6-window bank: the compiled passes against the numpy path, step by step,
     with inputs, with or without process noise and a skipped system. (A bank runs with
     process noise at every step or at none: without it ``P`` stays 0 and the time update
-    skips ``A P Aᵀ``, so mixing the two leaves an asymmetric ``P``.)"""
+    skips ``A P Aᵀ``, so mixing the two leaves an asymmetric ``P``.) Also 2 systems and 2
+    windows — the smallest counts that are not shared — with states measured on scales
+    seven decades apart, where only the unit-diagonal regularity test calls the
+    information regular (mutation testing found both untested)."""
     from fir_gym.estimators._fir_bank import WindowBank
     rng = np.random.default_rng(10 * n + p)
-    B, W = 40, 6
+    B, W = (40, 6) if size == "40x6" else (2, 2)
+    column_scale = np.ones(n) if size == "40x6" else 10.0 ** np.linspace(-7, 0, n)
     banks = [WindowBank(B, W, n), WindowBank(B, W, n)]
     for bank in banks:
         bank.restart(0, x_ref=np.ones((B, n)))
     lead = (B, W) if per_window else (1,)
     for k in range(2 * W):
         A = np.eye(n) + 0.1 * rng.normal(size=lead + (n, n))
-        C = rng.normal(size=lead + (p, n))
+        C = rng.normal(size=lead + (p, n)) * column_scale
         Bu = rng.normal(size=(B, W, n) if per_window else (B, n))
         Qx = spd(rng, (), n, 0.01) if noise else None
         y = rng.normal(size=(B, W, p) if per_window else (B, p))
@@ -444,9 +449,15 @@ def test_window_bank_kernels_equal_the_numpy_bank(n, p, per_window, noise):
         np.testing.assert_allclose(banks[0].Z, banks[1].Z, rtol=0, atol=1e-12 * scale)
     w = (2 * W) % W
     prior = spd(rng, (B,), n, 0.5)
-    # the read-out solves with the window's information F: round-off grows by κ(F)
-    kappa = np.linalg.cond(-banks[1].Z[:, n:, w, n:2 * n]).max()
+    # the read-out solves with the window's information F: round-off grows by κ(F) (of the
+    # unit-diagonal F, the scale the rank test uses; singular windows fall back alike)
+    F = -banks[1].Z[:, n:, w, n:2 * n]
+    d = np.sqrt(np.abs(np.diagonal(F, axis1=1, axis2=2)))
+    d = np.where(d > 0, d, 1.0)
+    kappa = np.linalg.cond(F / (d[:, :, None] * d[:, None, :]))
+    kappa = kappa[np.isfinite(kappa)].max(initial=1.0)
     tol = max(RTOL, 1e-15 * kappa)
+    assert np.isfinite(tol)
     for options in ({}, {"smoother": True}, {"prior": prior}, {"prior": prior[0]}):
         x, P, ok = banks[0].estimate(w, **options)
         with numpy_path():
