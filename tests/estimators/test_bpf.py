@@ -185,6 +185,11 @@ def test_batch_equals_single_systems_and_a_batch_of_one():
         xo = one.step(y[:1])
         for b, f in enumerate(singles):
             np.testing.assert_allclose(xb[b], f.step(y[b]), rtol=1e-12, atol=1e-12)
+            # and so does each single system's step information (mutation testing: untested)
+            for key in ("riccati_breakdown", "riccati_condition"):
+                if key in batch.last_info:
+                    assert f.last_info[key] == pytest.approx(batch.last_info[key][b],
+                                                             rel=1e-12), key
         np.testing.assert_allclose(xo[0], xb[0], rtol=1e-12, atol=1e-12)
     assert batch.P.shape == (3, 2, 2) and one.x.shape == (1, 2)
 
