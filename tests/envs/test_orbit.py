@@ -150,12 +150,12 @@ def test_reward_is_minus_the_saturated_tracking_and_thrust_cost():
     # the crash pays the cap for the terminal step and every step it forgoes
     crash = gym.make("fir_gym/Orbit-v0", initial_state=(1.5, -3.0)).unwrapped
     crash.reset(seed=0)
-    for k in range(1, 200):
+    steps, terminated = 0, False
+    while not terminated and steps < 200:
         _, reward, terminated, _, _ = crash.step(np.array([-1.0]))
-        if terminated:
-            break
+        steps += 1
     assert terminated
-    assert reward == pytest.approx(-cap * (1 + crash.max_episode_steps - k), rel=1e-12)
+    assert reward == pytest.approx(-cap * (1 + crash.max_episode_steps - steps), rel=1e-12)
 
 
 def test_the_design_point_is_a_fixed_point_of_the_model():
