@@ -291,7 +291,10 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         "**Run it.** `pip install \".[mutation]\"`, then `python scripts/mutation.py "
         "[MODULE ...]` on a checkout nobody else is testing from (it edits the files while "
         "it runs); `--results DIR` shares one results folder between two checkouts, each "
-        "with its own virtual environment, and `--table-only` writes this page from it.", "",
+        "with its own virtual environment, and `--table-only` writes this page from it. "
+        "`python scripts/apply_mutant.py MODULE OLD NEW [pytest args]` applies one mutant in "
+        "memory and runs the given tests: the check that a new test kills the survivor it "
+        "was written for (with `OLD` = `NEW`, the control, the tests pass).", "",
         "| module | kept | run | killed | survived | equivalent | incompetent | kill rate "
         "| 95 % interval | time |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|",
