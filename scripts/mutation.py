@@ -296,8 +296,8 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         "memory and runs the given tests: the check that a new test kills the survivor it "
         "was written for (with `OLD` = `NEW`, the control, the tests pass).", "",
         "| module | kept | run | killed | survived | equivalent | incompetent | kill rate "
-        "| 95 % interval | time |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| 95 % interval | time | commit |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     rows = []
     for o in sorted(outcomes, key=lambda o: o.module):
@@ -310,7 +310,7 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         low, high = wilson(o.killed, competent)
         lines.append(f"| `{o.module}` | {o.kept} | {run} | {o.killed} | {survived} | "
                      f"{len(equivalent)} | {o.incompetent} | {rate:.0%} | "
-                     f"{low:.0%}–{high:.0%} | {o.seconds / 60:.1f} min |")
+                     f"{low:.0%}–{high:.0%} | {o.seconds / 60:.1f} min | `{o.commit}` |")
         rows.append((o, equivalent))
     total_killed = sum(o.killed for o in outcomes)
     total_competent = sum(o.killed + len(o.survivors) - len(eq) for o, eq in rows)
