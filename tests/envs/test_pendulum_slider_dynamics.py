@@ -88,3 +88,48 @@ def test_bad_arguments():
         PendulumSliderDynamics(m1=0.0)
     with pytest.raises(ValueError, match="mu"):
         PendulumSliderDynamics(mu=-0.1)
+
+
+@pytest.mark.parametrize("difference", ["backward", "forward", "central"])
+def test_least_squares_recovers_parameters_that_fit_the_equations_exactly(difference):
+    """Paper 003's LSM against data built to satisfy its two regressions exactly (physical
+    equations, as its docstring writes them): smooth velocity sequences, the accelerations
+    the chosen finite difference makes of them, then the angles θ that the hinge equation
+    requires for M0 = 0.07 and the forces the slider equation requires for μ = 0.3 — so the
+    estimate must be those numbers to round-off (mutation testing found the normal force
+    and the centripetal term free to change)."""
+    d = PendulumSliderDynamics(equations="physical")
+    m1, m2, l, g, k, l0 = d.m1, d.m2, d.l, d.g, d.k, d.l0
+    m2l, J = m2 * l, d.I_c + m2 * l * l
+    mu, M0 = 0.3, 0.07
+    K = 80
+    t = np.arange(K)
+    Y = np.column_stack([0.03 + 0.01 * np.sin(0.05 * t), 0.3 * np.cos(0.02 * t),
+                         np.zeros(K), 0.5 * np.sin(0.01 * t) + 0.2])
+    idx = {"backward": np.arange(1, K), "forward": np.arange(0, K - 1),
+           "central": np.arange(1, K - 1)}[difference]
+    v = Y[:, [1, 3]]
+    acc = {"backward": lambda i: (v[i] - v[i - 1]) / d.dt,
+           "forward": lambda i: (v[i + 1] - v[i]) / d.dt,
+           "central": lambda i: (v[i + 1] - v[i - 1]) / (2 * d.dt)}[difference](idx)
+    x, w = Y[idx, 0], Y[idx, 3]
+    xdd, thdd = acc[:, 0], acc[:, 1]
+    # M0 θ̇ = −m2 g l sinθ − J θ̈ + m2 l cosθ ẍ, solved for θ: A sinθ + B cosθ = c
+    A, B, c = -m2l * g, m2l * xdd, M0 * w + J * thdd
+    th = np.arcsin(c / np.hypot(A, B)) - np.arctan2(B, A)
+    Y[idx, 2] = th
+    # μ N = U − 2k (x − l0) − m2 l sinθ θ̇² − (m1+m2) ẍ + m2 l cosθ θ̈: the force it needs
+    normal = (m1 + m2) * g + m2l * (np.cos(th) * w * w + np.sin(th) * thdd)
+    force = (mu * normal + 2 * k * (x - l0) + m2l * np.sin(th) * w * w + (m1 + m2) * xdd
+             - m2l * np.cos(th) * thdd)
+    U = np.zeros(K)
+    if difference == "backward":
+        U[idx - 1] = force
+    elif difference == "forward":
+        U[idx] = force
+    else:                                       # the mean of U[k−1] and U[k] is the force
+        for j, i in enumerate(idx):
+            U[i] = 2 * force[j] - U[i - 1]
+    est = d.least_squares_parameters(Y, U, difference)
+    assert est["mu"] == pytest.approx(mu, rel=1e-9)
+    assert est["M0"] == pytest.approx(M0, rel=1e-9)
