@@ -66,3 +66,36 @@ def test_prior_startup_tames_the_orbit_velocity_at_the_start():
 def test_startup_option_is_validated():
     with pytest.raises(ValueError, match="startup"):
         ExtendedFIRFilter(random_linear(0), horizon=4, startup="optimistic")
+
+
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
+def test_a_window_with_no_measurement_predicts_the_previous_estimate(path: str) -> None:
+    """Once a system's whole window is missing (``nan_policy="skip"``) its information is
+    singular, and the EFIR falls back to the model's prediction of its previous estimate:
+    ``x = f(x̂, u)``, ``P = F P Fᵀ + G Q Gᵀ`` (the module docstring's fallback) — for that
+    system only, the other one of the batch keeping its window (mutation testing found the
+    prediction's transpose and its process noise untested)."""
+    from compiled_paths import on_path
+    from sample_models import duffing_model
+
+    from fir_gym.estimators import make_estimator
+    model = duffing_model()
+    L = 6
+    efir = make_estimator("efir", model, horizon=L, nan_policy="skip", x0=[0.5, 0.2, 1.0],
+                          P0=0.01 * np.eye(3))
+    rng = np.random.default_rng(3)
+    x_true = np.array([0.5, 0.0, 1.0])
+    with on_path(path):
+        for k in range(40):
+            u = rng.normal(size=(2, 1)) * 0.3
+            x_true = model.f(x_true, u[0])
+            y = np.stack([model.h(x_true), model.h(x_true)]) + 0.05 * rng.normal(size=(2, 2))
+            if k >= 20:
+                y[1] = np.nan                                   # system 1 goes blind
+            x_prev, P_prev = efir.x.copy(), efir.P.copy()
+            efir.step(y, None if k == 0 else u)
+            if k >= 20 + L:                                     # its whole window is missing
+                f, F = model.linearize(x_prev[1], u[1])
+                np.testing.assert_allclose(efir.x[1], f, rtol=1e-12, atol=1e-14)
+                np.testing.assert_allclose(efir.P[1], F @ P_prev[1] @ F.T + model.GQGT,
+                                           rtol=1e-10, atol=1e-14)
