@@ -23,10 +23,12 @@ def lti(seed: int = 0, singular: bool = False) -> LinearModel:
 
 
 def ltv(seed: int = 1) -> TimeVaryingLinearModel:
+    """A, C and B all vary with k (a constant C or B would hide an index slip)."""
     m = lti(seed)
-    A = np.asarray(m.A)
-    return TimeVaryingLinearModel(A=lambda k: A * (1 + 0.1 * np.sin(k)), C=m.C, B=m.B,
-                                  Q=m.Q, R=m.R)
+    A, C, B = np.asarray(m.A), np.asarray(m.C), np.asarray(m.B)
+    return TimeVaryingLinearModel(A=lambda k: A * (1 + 0.1 * np.sin(k)),
+                                  C=lambda k: C * (1 + 0.2 * np.cos(k)),
+                                  B=lambda k: B * (1 + 0.3 * np.sin(2 * k)), Q=m.Q, R=m.R)
 
 
 def stream(f, steps: int = 25, seed: int = 3) -> np.ndarray:
@@ -92,3 +94,21 @@ def test_batch_in_lockstep_equals_separate_filters(method: str) -> None:
         alone = UFIRFilter(model, horizon=5, method=method)
         sep = np.array([alone.step(Y[k, b], U[k - 1, b] if k else None) for k in range(15)])
         assert np.abs(out[:, b] - sep).max() <= 1e-12 * max(1.0, np.abs(sep).max())
+
+
+@pytest.mark.parametrize(("form", "target"), [("filter", 4), ("predictor", 5), ("smoother", 0)])
+def test_the_batch_gain_recovers_the_targets_state_from_noise_free_data(form, target) -> None:
+    """Unbiasedness, the UFIR's defining property: on noise-free data of the window (no
+    input), ``S Y`` is exactly the state at the form's target — the last sample (filter),
+    one past it (predictor), the first (smoother)."""
+    from fir_gym.estimators.fir_gains import make_window
+    from fir_gym.estimators.ufir import ufir_gain
+    m = lti(4)
+    A, C = np.asarray(m.A), np.asarray(m.C)
+    L = 5
+    x = [np.array([1.0, -0.5, 2.0])]
+    for _ in range(L):
+        x.append(A @ x[-1])
+    Y = np.concatenate([C @ x[t] for t in range(L)])
+    S = ufir_gain(make_window(A, C, np.zeros((3, 3)), np.eye(2), L), form).S
+    np.testing.assert_allclose(S @ Y, x[target], rtol=1e-9, atol=1e-10)
