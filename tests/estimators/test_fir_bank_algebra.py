@@ -65,3 +65,21 @@ def test_information_is_regular_is_the_scale_free_eigenvalue_rule(n: int) -> Non
     # a diagonal matrix is regular at any scale of its entries, small ones included
     tiny = np.diag(10.0 ** -np.arange(1, n + 1) * 1e-3)[None]
     assert information_is_regular(tiny).all()
+
+
+@pytest.mark.parametrize("first", [True, False], ids=["first reference", "later reference"])
+def test_a_window_restarted_at_a_reference_starts_there(first: bool) -> None:
+    """``restart(w, x_ref)`` starts window ``w`` at ``x̄ = x_ref``: with no data since, its
+    estimate under a prior is ``x_ref`` itself (``b = 0``); the bank's first reference
+    counts as much as a later one (mutation testing found the first one droppable)."""
+    from fir_gym.estimators._fir_bank import WindowBank
+    rng = np.random.default_rng(0)
+    B, W, n = 3, 2, 2
+    bank = WindowBank(B, W, n)
+    if not first:
+        bank.restart(1, x_ref=np.zeros((B, n)))
+    X = rng.normal(size=(B, n))
+    bank.restart(0, x_ref=X)
+    x, P, ok = bank.estimate(0, prior=np.eye(n))
+    assert ok.all()
+    np.testing.assert_allclose(x, X, rtol=0, atol=1e-15)
