@@ -129,27 +129,35 @@ def test_batch_in_lockstep_equals_separate_smoothers() -> None:
 
 
 @pytest.mark.parametrize("path", ["numpy", "compiled"])
-def test_a_window_with_no_measurement_predicts_the_previous_smoothed_estimate(path: str
+@pytest.mark.parametrize("n_u", [0, 1], ids=["no input", "input"])
+def test_a_window_with_no_measurement_predicts_the_previous_smoothed_estimate(path: str,
+                                                                               n_u: int
                                                                                ) -> None:
     """Once a system's whole window is missing (``nan_policy="skip"``) the smoother falls
-    back to the model's prediction of its previous estimate, ``x = A x̂``, ``P = A P Aᵀ +
-    G Q Gᵀ`` (the window's oldest matrices; no input here) — that system only, the other one
-    of the batch keeping its window (mutation testing found the fallback untested)."""
+    back to the model's prediction of its previous estimate, ``x = A x̂ + B u[k−L]``,
+    ``P = A P Aᵀ + G Q Gᵀ`` (the estimate lags by ``L − 1``: the input is the one stored
+    with the window's oldest sample) — that system only, the other one of the batch keeping
+    its window (mutation testing found the fallback untested)."""
     from compiled_paths import on_path
-    model = lti(5, n_u=0)
+    model = lti(5, n_u=n_u)
     A, GQG = np.asarray(model.A), model.GQGT
     L = 4
     smoother = FIRSmoother(model, horizon=L, nan_policy="skip")
     rng = np.random.default_rng(6)
+    inputs = []                                   # inputs[k]: the u passed with y[k] (u[k−1])
     with on_path(path):
         for k in range(30):
             y = rng.normal(size=(2, 1))
+            u = rng.normal(size=(2, n_u)) if n_u and k else None
+            inputs.append(u)
             if k >= 12:
                 y[1] = np.nan                                   # system 1 goes blind
             x_prev, P_prev = smoother.x.copy(), smoother.P.copy()
-            smoother.step(y)
+            smoother.step(y, u)
             if k >= 12 + L:                                     # its whole window is missing
-                np.testing.assert_allclose(smoother.x[1], A @ x_prev[1], rtol=1e-12,
-                                           atol=1e-14)
+                want = A @ x_prev[1]
+                if n_u:
+                    want = want + np.asarray(model.B) @ inputs[k - L + 1][1]   # u[k − L]
+                np.testing.assert_allclose(smoother.x[1], want, rtol=1e-12, atol=1e-14)
                 np.testing.assert_allclose(smoother.P[1], A @ P_prev[1] @ A.T + GQG,
                                            rtol=1e-10, atol=1e-14)
