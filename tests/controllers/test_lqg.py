@@ -49,6 +49,32 @@ def test_gain_equals_the_iterated_riccati_equation_and_stabilises(env_id):
     assert np.max(np.abs(design.closed_loop_poles)) < 1.0     # the linearisation is stabilised
 
 
+@pytest.mark.parametrize("env_id", fir_gym.ENV_IDS)
+def test_the_riccati_solution_is_the_cost_to_go_of_the_reward_weights(env_id):
+    """``x0ᵀ P x0`` is the closed loop's summed cost, each step's cost the design point's
+    weights ``M`` on ``[x[k+1]; u[k]]`` (the reward's: the state after the step) — computed
+    here by running the linearised closed loop, not from the design's own Q, R, N (mutation
+    testing found a scaled cost matrix unseen: it leaves K unchanged and scales P)."""
+    plant = gym.make(env_id).unwrapped
+    point = design_point(plant)
+    design = lqr_design(plant.model, point)
+    s = list(point.states)
+    A, B, K = design.A[np.ix_(s, s)], design.B[s], design.K[:, s]
+    keep = s + [len(point.x) + j for j in range(B.shape[1])]
+    M = point.M[np.ix_(keep, keep)]
+    x0 = np.random.default_rng(0).normal(size=len(s)) * 1e-2
+    x, cost = x0.copy(), 0.0
+    for _ in range(100_000):
+        u = -K @ x
+        x_next = A @ x + B @ u
+        z = np.concatenate([x_next, u])
+        cost += z @ M @ z
+        x = x_next
+        if np.abs(x).max() < 1e-14 * np.abs(x0).max():
+            break
+    assert cost == pytest.approx(x0 @ design.P @ x0, rel=1e-6)
+
+
 def test_the_carrier_lqr_is_the_one_step_predictor():
     """B = 0: minimising ((x1[k+1] - c_max a) / σ)² gives a = (A x)_1 / c_max."""
     env = wrap_observation(gym.make("fir_gym/CarrierMotion-v0"), "true")
