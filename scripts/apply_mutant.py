@@ -7,7 +7,8 @@ kills the survivor it was written for, without editing any file.
 in its source and is replaced by ``NEW``. Only the top-level function or class holding it
 is re-executed in the module's namespace; a class is patched in place (the methods'
 zero-argument ``super`` cells pointed at it), so subclasses, registries and earlier
-imports see the mutant too. The tests then run in this process (``pytest.main``).
+imports see the mutant too, and a function replaces every module's name for it (a
+package's re-export included). The tests then run in this process (``pytest.main``).
 ``OLD`` = ``NEW`` is the control: the tests must pass.
 
 numba's cache goes to a fresh temporary folder: a mutated kernel compiled into the
@@ -64,6 +65,13 @@ class Mutant:
                         fn.__closure__[code.co_freevars.index("__class__")].cell_contents = before
                 setattr(before, key, value)
             mod.__dict__[node.name] = before
+        elif before is not None:
+            # a function: every module that imported it by name gets the mutant too
+            after = mod.__dict__[node.name]
+            for other in list(sys.modules.values()):
+                for key, value in list(getattr(other, "__dict__", {}).items()):
+                    if value is before:
+                        setattr(other, key, after)
         print(f"mutant applied in {self.module}: {self.old!r} -> {self.new!r}", file=sys.stderr)
 
 
