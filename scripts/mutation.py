@@ -104,6 +104,9 @@ class Configuration:
     sample: int
     seed: int
     equivalent: list[Equivalent]
+    #: survivors of a module's last run killed by a test added after it (``reason``: the
+    #: test), each checked with scripts/apply_mutant.py
+    killed_since: list[Equivalent]
     #: modules whose mutants run with numba's cache emptied, and their sample size
     cold_cache: list[str]
     cold_sample: int
@@ -117,10 +120,17 @@ class Configuration:
         return any(re.fullmatch(pattern, operator) for pattern in self.operators)
 
     def equivalent_reason(self, module: str, operator: str, mutated: str) -> str | None:
-        for e in self.equivalent:
-            if (e.module, e.operator, e.mutated) == (module, operator, mutated):
-                return e.reason
-        return None
+        return _find(self.equivalent, module, operator, mutated)
+
+    def killed_by(self, module: str, operator: str, mutated: str) -> str | None:
+        return _find(self.killed_since, module, operator, mutated)
+
+
+def _find(entries: list[Equivalent], module: str, operator: str, mutated: str) -> str | None:
+    for e in entries:
+        if (e.module, e.operator, e.mutated) == (module, operator, mutated):
+            return e.reason
+    return None
 
 
 @dataclass
@@ -147,13 +157,15 @@ def configuration(root: Path = ROOT) -> Configuration:
         if missing:
             raise SystemExit(f"[tool.fir-gym.mutation] names files that do not exist: {missing}")
     equivalent = [Equivalent(**e) for e in table.get("equivalent", [])]
+    killed_since = [Equivalent(**e) for e in table.get("killed-since", [])]
     cold = [str(m) for m in table.get("cold-cache", [])]
-    unknown = sorted(({e.module for e in equivalent} | set(cold)) - set(modules))
+    unknown = sorted(({e.module for e in equivalent + killed_since} | set(cold))
+                     - set(modules))
     if unknown:
         raise SystemExit("[tool.fir-gym.mutation] equivalent or cold-cache entries of "
                          f"unlisted modules: {unknown}")
     return Configuration(modules, [str(p) for p in table["operators"]], int(table["sample"]),
-                         int(table["seed"]), equivalent,
+                         int(table["seed"]), equivalent, killed_since,
                          cold,
                          int(table.get("cold-sample", table["sample"])),
                          [str(p) for p in table.get("twin-only", [])])
@@ -277,17 +289,21 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         "`[tool.fir-gym.mutation]` in pyproject.toml; how: the script's docstring). *Kept*: "
         "the module's mutants of the kept operators; *run*: the seeded sample of them that "
         "ran. A mutant is killed when a test of its module fails or times out; incompetent "
-        "when it does not compile; equivalent when triaged as unable to change any result "
-        "(its reason below). The kill rate is killed / (run − incompetent − equivalent), "
-        "with its 95 % Wilson interval over the sample.", "",
+        "when it does not compile; equivalent when triaged as unable to change any number the "
+        "module computes (its reason below; a mutant of drawing code only is listed as "
+        "such). The kill rate is killed / (run − incompetent − equivalent), "
+        "with its 95 % Wilson interval over the sample. *Killed since*: survivors of the "
+        "module's run that a test added after it kills (each checked with "
+        "`scripts/apply_mutant.py`, control first; the test is named below) — *now* counts "
+        "them; a new run of the module replaces both.", "",
         "**Why cosmic-ray.** It mutates the module's own file in place and runs any test "
         "command, which is what this repository's package-dir mapping needs: the strict "
         "editable install serves `fir_gym.estimators` from `estimators/` itself, so a tool "
         "that copies the tree and tests the copy (mutmut 3's `mutants/` folder) would test "
         "the unmutated installed files. Its operators are filtered to the plausible slips of "
-        "numerical code, and a seeded sample of each module's mutants runs, so that every "
-        "module fits in about an hour on 2 cores (the script's docstring says which "
-        "operators and why).", "",
+        "numerical code, and a seeded sample of each module's mutants runs, so that a full "
+        "run fits in about an hour on 2 cores, two checkouts in parallel (the script's "
+        "docstring says which operators and why).", "",
         "**Run it.** `pip install \".[mutation]\"`, then `python scripts/mutation.py "
         "[MODULE ...]` on a checkout nobody else is testing from (it edits the files while "
         "it runs); `--results DIR` shares one results folder between two checkouts, each "
@@ -296,8 +312,8 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         "memory and runs the given tests: the check that a new test kills the survivor it "
         "was written for (with `OLD` = `NEW`, the control, the tests pass).", "",
         "| module | kept | run | killed | survived | equivalent | incompetent | kill rate "
-        "| 95 % interval | time | commit |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---|",
+        "| 95 % interval | time | commit | killed since | now |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---|---:|---:|",
     ]
     rows = []
     for o in sorted(outcomes, key=lambda o: o.module):
@@ -308,22 +324,29 @@ def table(outcomes: list[Outcome], config: Configuration) -> str:
         run = competent + len(equivalent) + o.incompetent
         rate = o.killed / competent if competent else float("nan")
         low, high = wilson(o.killed, competent)
+        since = sum(1 for s in o.survivors if config.killed_by(
+            o.module, str(s["operator"]), str(s["mutated"])))
+        now = (o.killed + since) / competent if competent else float("nan")
         lines.append(f"| `{o.module}` | {o.kept} | {run} | {o.killed} | {survived} | "
                      f"{len(equivalent)} | {o.incompetent} | {rate:.0%} | "
-                     f"{low:.0%}–{high:.0%} | {o.seconds / 60:.1f} min | `{o.commit}` |")
+                     f"{low:.0%}–{high:.0%} | {o.seconds / 60:.1f} min | `{o.commit}` | "
+                     f"{since} | {now:.0%} |")
         rows.append((o, equivalent))
     total_killed = sum(o.killed for o in outcomes)
     total_competent = sum(o.killed + len(o.survivors) - len(eq) for o, eq in rows)
     lines += ["", f"Over all modules: {total_killed} of {total_competent} non-equivalent "
               f"mutants killed ({total_killed / max(total_competent, 1):.1%}), in "
-              f"{sum(o.seconds for o in outcomes) / 60:.0f} min of mutant runs."]
+              f"{sum(o.seconds for o in outcomes) / 60:.0f} min of mutant runs (summed over "
+              "the modules; two checkouts in parallel take about half of it in wall time)."]
     for o, _ in rows:
         if not o.survivors:
             continue
         lines += ["", f"## Survivors in `{o.module}`", ""]
         for s in o.survivors:
-            reason = config.equivalent_reason(o.module, str(s["operator"]), str(s["mutated"]))
-            note = f" — equivalent: {reason}" if reason else ""
+            key = (o.module, str(s["operator"]), str(s["mutated"]))
+            reason, test = config.equivalent_reason(*key), config.killed_by(*key)
+            note = (f" — equivalent: {reason}" if reason else
+                    f" — killed since by {test}" if test else "")
             lines.append(f"- line {s['line']}: {s['operator']} → `{s['mutated']}`{note}")
     return "\n".join(lines) + "\n"
 
