@@ -57,3 +57,18 @@ def test_carrier_motion_reward():
     env.reset(seed=0, options={"state": [1e3, 0.0]})
     _, reward, *_ = env.step(np.array([0.0]))
     assert reward == -100.0
+
+
+@pytest.mark.parametrize("env_id", ["fir_gym/CarrierMotion-v0", "fir_gym/VanDerPol-v0"])
+def test_the_lqg_design_weights_are_the_rewards_cost(env_id: str) -> None:
+    """Where the operating point is the origin (``x* = 0``, ``u* = 0``), the design point's
+    weights ``M`` on ``[x[k+1]; a[k]]`` are the reward's cost exactly: ``zᵀ M z = −reward``
+    below the cap (mutation testing found a weight free to change)."""
+    from fir_gym.controllers import design_point
+    env, steps = rollout(env_id)
+    point = design_point(env)
+    assert not point.x.any() and not point.u.any()
+    assert steps
+    for x, a, reward in steps:
+        z = np.concatenate([x, [a]])
+        assert z @ point.M @ z == pytest.approx(-reward, rel=1e-10, abs=1e-14)
