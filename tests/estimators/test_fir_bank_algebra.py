@@ -80,6 +80,6 @@ def test_a_window_restarted_at_a_reference_starts_there(first: bool) -> None:
         bank.restart(1, x_ref=np.zeros((B, n)))
     X = rng.normal(size=(B, n))
     bank.restart(0, x_ref=X)
-    x, P, ok = bank.estimate(0, prior=np.eye(n))
+    x, _, ok = bank.estimate(0, prior=np.eye(n))
     assert ok.all()
     np.testing.assert_allclose(x, X, rtol=0, atol=1e-15)
