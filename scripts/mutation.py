@@ -45,7 +45,10 @@ would then count as killed.
   3 of 20);
 * ``equivalent``: the mutants triaged as equivalent (they cannot change any result), each
   with its module, operator, mutated line and the reason; they leave the kill rate's
-  denominator and are listed with their reason.
+  denominator and are listed with their reason;
+* ``killed-since``: survivors of a module's last run that a test added after it kills, each
+  checked with ``scripts/apply_mutant.py`` (control first), with the test as ``reason``: the
+  table counts them in its *now* column until a new run of the module replaces both.
 
 Before a module's mutants, its tests run once unmutated (the baseline): if they fail, or
 do not run at all, the run stops — a test command that cannot pass would kill every mutant.
