@@ -20,13 +20,22 @@ from __future__ import annotations
 
 from fir_gym._extras import MissingExtra, install_hint
 
+
+def _missing(error: ImportError) -> MissingExtra:
+    # (jax's own ImportError for a missing jaxlib names no module: the hint is JAX's)
+    return MissingExtra("fir_gym.jax: " + str(install_hint(error.name) or install_hint("jax")))
+
+
+# jax first, then gymnax: without the extra at all, JAX is what is named missing
+# (exercised without the extra: tests/jax/test_jax_boundary.py)
+try:
+    import jax
+except ImportError as error:
+    raise _missing(error) from None
 try:
     import gymnax  # noqa: F401
-    import jax
-except ImportError as error:          # exercised without the extra (tests/jax/test_jax_boundary.py)
-    # (jax's own ImportError for a missing jaxlib names no module: the hint is JAX's)
-    raise MissingExtra("fir_gym.jax: " + str(install_hint(error.name) or install_hint("jax"))
-                       ) from None
+except ImportError as error:
+    raise _missing(error) from None
 
 jax.config.update("jax_enable_x64", True)
 
