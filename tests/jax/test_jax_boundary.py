@@ -65,12 +65,14 @@ def test_nothing_outside_fir_gym_jax_imports_it_or_jax() -> None:
 
 
 @pytest.mark.parametrize("missing", ["jax", "gymnax", "jaxlib"])
-def test_without_the_extra_the_import_names_it(missing: str) -> None:
+def test_without_the_extra_the_import_names_it(missing: str, tmp_path) -> None:
     code = (f"import sys; sys.modules[{missing!r}] = None\n"
             "try:\n    import fir_gym.jax\nexcept ImportError as e:\n    print(e)\n"
             "else:\n    print('imported')\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         cwd=ROOT / "tests", check=True).stdout.strip()
+    # -P: the working folder stays off sys.path (tests/ holds a folder named jax, which would
+    # import as a namespace package "jax" where JAX is not installed)
+    out = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True,
+                         cwd=tmp_path, check=True).stdout.strip()
     assert out.count("\n") == 0 and 'pip install ".[jax]"' in out, out
     # the first package of the import order (jax, then gymnax) that is absent is named —
     # without the extra at all (CI), that is JAX whichever one the test hides
