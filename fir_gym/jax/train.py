@@ -469,9 +469,11 @@ class JaxTraining:
 
     @property
     def iqm(self) -> float:
-        from scipy.stats import trim_mean
+        """The IQM over the seeds' mean returns (:func:`fir_gym.training.stats.iqm`, the SB3
+        backend's)."""
+        from fir_gym.training.stats import iqm
 
-        return float(trim_mean(np.asarray(self.per_seed), 0.25))
+        return iqm(self.per_seed)
 
     @property
     def steps_trained(self) -> int:
