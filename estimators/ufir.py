@@ -48,17 +48,13 @@ METHODS = ("batch", "iterative")
 def _stacked_observation(win: Window, t: int) -> tuple[FloatArray, FloatArray]:
     """``C̃`` (rows ``C_j Φ_j``, ``Φ_j = A_{j−1} ⋯ A_0``) and ``Φ_t``, by running the
     transition products forward (``t`` from 0, the smoother's target, to ``L``)."""
-    n = win.A.shape[1]
-    Phi, rows = np.eye(n), []
-    Phi_t = Phi if t == 0 else None
+    Phi, rows, Phi_t = np.eye(win.A.shape[1]), [], None
     for j in range(win.horizon):
-        rows.append(win.C[j] @ Phi)
-        if j < max(t, win.horizon - 1):
-            Phi = win.A[j] @ Phi
-        if j + 1 == t:
+        if j == t:
             Phi_t = Phi
-    assert Phi_t is not None, "t must be in 0 .. horizon"
-    return np.vstack(rows), Phi_t
+        rows.append(win.C[j] @ Phi)
+        Phi = win.A[j] @ Phi
+    return np.vstack(rows), Phi if Phi_t is None else Phi_t
 
 
 def ufir_gain(win: Window, form: str = "filter") -> GainResult:
