@@ -18,6 +18,7 @@ import types
 import numpy as np
 import pytest
 from compiled_paths import numpy_path
+from matrices import spd, unit_diagonal
 
 from fir_gym.estimators import compiled
 from fir_gym.estimators._kalman_linalg import cholesky, spd_inverse
@@ -40,11 +41,6 @@ from fir_gym.estimators.compiled import watch  # noqa: E402
 
 RTOL = 1e-12
 LIMITS = new_limits(1e300, 10, 1e300)          # a watch that flags nothing finite
-
-
-def spd(rng, shape, n, scale=1.0):
-    A = rng.normal(size=shape + (n, n))
-    return scale * (A @ A.swapaxes(-1, -2)) / n + 0.1 * np.eye(n)
 
 
 def close(a, b, scale=1.0):
@@ -451,10 +447,7 @@ def test_window_bank_kernels_equal_the_numpy_bank(n, p, per_window, noise, size)
     prior = spd(rng, (B,), n, 0.5)
     # the read-out solves with the window's information F: round-off grows by κ(F) (of the
     # unit-diagonal F, the scale the rank test uses; singular windows fall back alike)
-    F = -banks[1].Z[:, n:, w, n:2 * n]
-    d = np.sqrt(np.abs(np.diagonal(F, axis1=1, axis2=2)))
-    d = np.where(d > 0, d, 1.0)
-    kappa = np.linalg.cond(F / (d[:, :, None] * d[:, None, :]))
+    kappa = np.linalg.cond(unit_diagonal(-banks[1].Z[:, n:, w, n:2 * n]))
     kappa = kappa[np.isfinite(kappa)].max(initial=1.0)
     tol = max(RTOL, 1e-15 * kappa)
     assert np.isfinite(tol)

@@ -14,15 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from matrices import spd
 
 from fir_gym.estimators._kalman_linalg import cho_solve, cholesky, factored_joseph, rmul
 
 BATCHES = [1, 7, 8, 33]
-
-
-def spd(rng: np.random.Generator, n_b: int, m: int) -> np.ndarray:
-    G = rng.normal(size=(n_b, m, m))
-    return G @ G.mT + 0.5 * np.eye(m)
 
 
 @pytest.mark.parametrize("n_b", BATCHES)
@@ -40,7 +36,7 @@ def test_rmul_is_the_matrix_product(n_b: int, batched: bool) -> None:
 def test_cholesky_is_lapacks_per_system_and_nan_where_not_positive_definite(n_b: int, m: int
                                                                           ) -> None:
     rng = np.random.default_rng(10 * m + n_b)
-    S = spd(rng, n_b, m)
+    S = spd(rng, (n_b,), m)
     S[-1] = -np.eye(m)                                 # the last system is not PD
     L = cholesky(S)
     for b in range(n_b - 1):
@@ -51,7 +47,7 @@ def test_cholesky_is_lapacks_per_system_and_nan_where_not_positive_definite(n_b:
 @pytest.mark.parametrize("m", [1, 2, 3, 4, 5])
 def test_cho_solve_solves_the_system(m: int) -> None:
     rng = np.random.default_rng(m)
-    S = spd(rng, 6, m)
+    S = spd(rng, (6,), m)
     Y = rng.normal(size=(6, m, 2))
     X = cho_solve(np.linalg.cholesky(S), Y)
     np.testing.assert_allclose(X, np.linalg.solve(S, Y), rtol=1e-10, atol=1e-12)
@@ -62,9 +58,9 @@ def test_cho_solve_solves_the_system(m: int) -> None:
 def test_factored_joseph_is_the_joseph_form(n_b: int, per_system: bool) -> None:
     rng = np.random.default_rng(100 + n_b)
     n, p = 3, 2
-    P = spd(rng, n_b, n)
+    P = spd(rng, (n_b,), n)
     H = rng.normal(size=(n_b, p, n) if per_system else (p, n))
-    R = spd(rng, n_b, p) if per_system else spd(rng, 1, p)[0]
+    R = spd(rng, (n_b,), p) if per_system else spd(rng, (), p)
     K = rng.normal(size=(n_b, n, p))
     out = factored_joseph(P, H, R, K)
     for b in range(n_b):
