@@ -89,8 +89,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @dataclass(frozen=True)
-class Equivalent:
-    """A mutant triaged as equivalent: it cannot change any result the module gives."""
+class Triaged:
+    """A surviving mutant triaged by hand: equivalent (``reason``: why it cannot change a
+    result) or killed since by a later test (``reason``: the test)."""
 
     module: str
     operator: str
@@ -106,10 +107,10 @@ class Configuration:
     operators: list[str]
     sample: int
     seed: int
-    equivalent: list[Equivalent]
+    equivalent: list[Triaged]
     #: survivors of a module's last run killed by a test added after it (``reason``: the
     #: test), each checked with scripts/apply_mutant.py
-    killed_since: list[Equivalent]
+    killed_since: list[Triaged]
     #: modules whose mutants run with numba's cache emptied, and their sample size
     cold_cache: list[str]
     cold_sample: int
@@ -129,7 +130,7 @@ class Configuration:
         return _find(self.killed_since, module, operator, mutated)
 
 
-def _find(entries: list[Equivalent], module: str, operator: str, mutated: str) -> str | None:
+def _find(entries: list[Triaged], module: str, operator: str, mutated: str) -> str | None:
     for e in entries:
         if (e.module, e.operator, e.mutated) == (module, operator, mutated):
             return e.reason
@@ -159,8 +160,8 @@ def configuration(root: Path = ROOT) -> Configuration:
         missing = [p for p in (module, *tests) if not (root / p.split("::")[0]).exists()]
         if missing:
             raise SystemExit(f"[tool.fir-gym.mutation] names files that do not exist: {missing}")
-    equivalent = [Equivalent(**e) for e in table.get("equivalent", [])]
-    killed_since = [Equivalent(**e) for e in table.get("killed-since", [])]
+    equivalent = [Triaged(**e) for e in table.get("equivalent", [])]
+    killed_since = [Triaged(**e) for e in table.get("killed-since", [])]
     cold = [str(m) for m in table.get("cold-cache", [])]
     unknown = sorted(({e.module for e in equivalent + killed_since} | set(cold))
                      - set(modules))
