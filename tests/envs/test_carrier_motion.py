@@ -88,3 +88,34 @@ def test_reward_is_normalised_compensation_residual():
 def test_invalid_parameters_raise(kwargs):
     with pytest.raises(ValueError, match="|".join(kwargs)):
         gym.make("fir_gym/CarrierMotion-v0", **kwargs)
+
+
+def test_the_default_plant_is_paper_001s():
+    """The defaults are the carrier model as paper 001 prints it (docs/papers.md#001-plant):
+    ``ẋ = [[0, 1], [−0.36, −0.06 + Δ22]] x + [0.6, −0.036]ᵀ w``, ``z = [1 + Δc, 0] x + v``,
+    ``q = 0.035``, ``v = 1`` — the matrices the env samples, with Δ22 and Δc where asked."""
+    env = gym.make("fir_gym/CarrierMotion-v0").unwrapped
+    A, G, C = carrier_continuous(env.params)
+    np.testing.assert_array_equal(A, [[0.0, 1.0], [-0.36, -0.06]])
+    np.testing.assert_array_equal(G, [[0.6], [-0.036]])
+    np.testing.assert_array_equal(C, [[1.0, 0.0]])
+    assert env.params["q"] == 0.035 and env.params["v"] == 1.0
+    off = gym.make("fir_gym/CarrierMotion-v0", delta22=0.006, delta_c=-0.1).unwrapped
+    A, _, C = carrier_continuous(off.params)
+    np.testing.assert_allclose(A, [[0.0, 1.0], [-0.36, -0.054]], rtol=1e-15)
+    np.testing.assert_allclose(C, [[0.9, 0.0]], rtol=1e-15)
+
+
+def test_the_lqr_is_the_one_step_predictor_of_the_deck():
+    """The action does not move the deck, so the cost ``((x1[k+1] − c_max a) / σ1)²`` is
+    least at ``a = E[x1[k+1] | x] / c_max = (C A_d x) / c_max`` — the LQR on the design
+    point must be that certainty-equivalent predictor, on both states (``u = −K x``)."""
+    from fir_gym.controllers import design_point
+    from fir_gym.controllers.lqr import lqr_design
+    for c_max in (0.7, 2.0):
+        env = gym.make("fir_gym/CarrierMotion-v0", c_max=c_max).unwrapped
+        m = env.model
+        predictor = (m.C @ m.A)[0] / c_max
+        assert np.all(np.abs(predictor) > 1e-2)                # both states carry weight
+        K = lqr_design(m, design_point(env)).K
+        np.testing.assert_allclose(-K[0], predictor, rtol=1e-9)   # exact differences of linear f

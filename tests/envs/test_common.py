@@ -248,3 +248,18 @@ def test_model_linearize_equals_f_and_F(env_id):
     fx, Fx = model.linearize(X, U)
     np.testing.assert_allclose(fx, model.f(X, U), rtol=0, atol=1e-15)
     np.testing.assert_allclose(Fx, model.F(X, U), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_plant_options_are_keyword_only(env_id):
+    """``gym.make(env_id, sample_period=...)``: every option of a plant is passed by name, so
+    a positional slip cannot land in the wrong parameter (a constructor called directly
+    refuses a positional option)."""
+    import inspect
+    cls = type(gym.make(env_id).unwrapped)
+    params = list(inspect.signature(cls).parameters.values())
+    assert params
+    late = [p.name for p in params if p.kind not in (p.KEYWORD_ONLY, p.VAR_KEYWORD)]
+    assert not late, f"{env_id}: options not keyword-only: {late}"
+    with pytest.raises(TypeError):
+        cls(0.5)

@@ -46,6 +46,19 @@ def test_van_der_pol_reward():
         assert reward == pytest.approx(-min(cost, cap), rel=1e-12, abs=1e-15)
 
 
+@pytest.mark.parametrize("state_bound", [20.0, 5.0])
+def test_van_der_pol_cap_is_the_largest_cost_inside_the_domain(state_bound: float):
+    """Leaving the domain pays ``cost_cap`` for every step left, so that ending an episode
+    early cannot pay better than staying, the cap is at least every per-step cost inside
+    ``|x1|, |x2| <= state_bound``, ``|a| <= 1`` — and it is that largest cost (the
+    docstring), not more: found here by brute force over the domain's grid."""
+    env = gym.make("fir_gym/VanDerPol-v0", state_bound=state_bound).unwrapped
+    side = np.linspace(-state_bound, state_bound, 41)
+    x1, x2, a = np.meshgrid(side, side, np.linspace(-1.0, 1.0, 9), indexing="ij")
+    largest = ((x1 ** 2 + x2 ** 2) / 4 + 0.01 * a * a).max()
+    assert env.cost_cap == pytest.approx(largest, rel=1e-14)
+
+
 def test_carrier_motion_reward():
     """``−min(((x1' − a c_max) / σ1)², 100)``: the residual of the compensated deck over a
     constant σ1 (so ``−reward / (x1' − a c_max)²`` is one number over the episode), and the

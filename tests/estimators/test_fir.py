@@ -238,27 +238,34 @@ def test_registered_and_batched_info() -> None:
 
 def restart_matches_fresh(make, x0: np.ndarray, Y: np.ndarray, U: np.ndarray, k_r: int,
                           who: int, startup_steps: int = 4) -> None:
-    """After ``restart([who])`` before step ``k_r``, ``who`` equals a fresh filter on the rest.
+    """After ``restart([who])`` before step ``k_r``, ``who`` equals a fresh filter on the rest
+    (its estimates and the divergence watch's NIS).
 
     ``make(x0)`` builds the filter; the batch gets the rows of ``x0``, each fresh
     single filter its own row. The other systems must not notice the restart.
     """
     T, B = Y.shape[:2]
     batch = make(x0)
-    out = []
+    out, nis = [], []
     for k in range(T):
         if k == k_r:
             batch.restart([who])
         out.append(batch.step(Y[k], U[k - 1] if k else None))
+        nis.append(batch.last_info["nis"])
         if k >= k_r:
             assert batch.last_info["startup"][who] == (k - k_r < startup_steps)
-    out = np.array(out)
+    out, nis = np.array(out), np.array(nis)
     for b in range(B):
         start = k_r if b == who else 0
         alone = make(x0[b])
-        ref = np.array([alone.step(Y[k, b], U[k - 1, b] if k > start else None)
-                        for k in range(start, T)])
+        ref, ref_nis = [], []
+        for k in range(start, T):
+            ref.append(alone.step(Y[k, b], U[k - 1, b] if k > start else None))
+            ref_nis.append(alone.last_info["nis"])
+        ref, ref_nis = np.array(ref), np.array(ref_nis)
         assert np.abs(out[start:, b] - ref).max() <= 1e-10 * max(1.0, np.abs(ref).max())
+        # the divergence watch's innovation test restarts with the estimate: the same NIS
+        np.testing.assert_allclose(nis[start:, b], ref_nis, rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("gain", GAINS)

@@ -130,17 +130,24 @@ def test_batch_in_lockstep_equals_separate_smoothers() -> None:
 
 @pytest.mark.parametrize("path", ["numpy", "compiled"])
 @pytest.mark.parametrize("n_u", [0, 1], ids=["no input", "input"])
+@pytest.mark.parametrize("varying", [False, True], ids=["lti", "ltv"])
 def test_a_window_with_no_measurement_predicts_the_previous_smoothed_estimate(path: str,
-                                                                               n_u: int
+                                                                               n_u: int,
+                                                                               varying: bool
                                                                                ) -> None:
     """Once a system's whole window is missing (``nan_policy="skip"``) the smoother falls
     back to the model's prediction of its previous estimate, ``x = A x̂ + B u[k−L]``,
     ``P = A P Aᵀ + G Q Gᵀ`` (the estimate lags by ``L − 1``: the input is the one stored
-    with the window's oldest sample) — that system only, the other one of the batch keeping
-    its window (mutation testing found the fallback untested)."""
+    with the window's oldest sample, and ``A`` is the model's at that sample's time ``k −
+    L``) — that system only, the other one of the batch keeping its window (mutation
+    testing found the fallback, and its time index on a time-varying model, untested)."""
     from compiled_paths import on_path
     model = lti(5, n_u=n_u)
-    A, GQG = np.asarray(model.A), model.GQGT
+    GQG = model.GQGT
+    if varying:
+        base = np.asarray(model.A)
+        model = TimeVaryingLinearModel(A=lambda k: base * (1 + 0.3 * np.sin(k)), C=model.C,
+                                       B=model.B, Q=model.Q, R=model.R)
     L = 4
     smoother = FIRSmoother(model, horizon=L, nan_policy="skip")
     rng = np.random.default_rng(6)
@@ -155,9 +162,34 @@ def test_a_window_with_no_measurement_predicts_the_previous_smoothed_estimate(pa
             x_prev, P_prev = smoother.x.copy(), smoother.P.copy()
             smoother.step(y, u)
             if k >= 12 + L:                                     # its whole window is missing
+                A = model.matrices(k - L).A
                 want = A @ x_prev[1]
                 if n_u:
-                    want = want + np.asarray(model.B) @ inputs[k - L + 1][1]   # u[k − L]
+                    want = want + model.matrices(k - L).B @ inputs[k - L + 1][1]  # u[k − L]
                 np.testing.assert_allclose(smoother.x[1], want, rtol=1e-12, atol=1e-14)
                 np.testing.assert_allclose(smoother.P[1], A @ P_prev[1] @ A.T + GQG,
                                            rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("gain", ["two-stage", "batch"])
+def test_the_innovation_test_predicts_from_the_fir_filter_of_the_same_window(gain: str
+                                                                          ) -> None:
+    """The smoother's estimate lags by ``L − 1``, so its divergence watch tests the
+    innovation of ``y[k]`` against the FIR *filter* over the window ending at ``k − 1``
+    (its ``x̂[k−1]`` and ``P``): from the first step whose previous window is full (``k =
+    L``) on, the NIS is a :class:`FIRFilter`'s of the same horizon and gain, step for step
+    (mutation testing found the start-up boundary of that prior untested)."""
+    from fir_gym.estimators.fir import FIRFilter
+    model = lti(4)
+    L = 5
+    _, ys, us = simulate(model, 20, seed=8)
+    smoother = FIRSmoother(model, horizon=L, gain=gain)
+    filt = FIRFilter(model, horizon=L, gain=gain)
+    for k, y in enumerate(ys):
+        u = us[k - 1] if k else None
+        smoother.step(y, u)
+        filt.step(y, u)
+        if k >= L:
+            assert np.isfinite(smoother.last_info["nis"])
+            np.testing.assert_allclose(smoother.last_info["nis"], filt.last_info["nis"],
+                                       rtol=1e-9)
