@@ -78,6 +78,7 @@ from flax import struct
 from gymnax.environments import spaces
 
 from ._x64 import require_x64
+from .kalman import Belief, WatchLimits, watch
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)
 TRUE_MU = 19.92244165
@@ -329,14 +330,11 @@ def ekf_watch(state: OrbitState, x: jax.Array, P: jax.Array, nis: jax.Array,
               params: OrbitParams) -> OrbitState:
     """:meth:`fir_gym.estimators.base.Estimator._accept` for one system: store the new
     estimate where it is finite, count high NIS, raise the sticky ``diverged`` flag."""
-    finite = jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(P))
-    trace = jnp.where(finite, jnp.trace(P), 0.0)
-    high = ~(nis <= params.nis_threshold)                 # NaN counts as above
-    nis_run = jnp.where(high, state.nis_run + 1, 0)
-    blown = ~finite | (trace > params.max_covariance_trace) | (nis_run >= params.nis_patience)
-    return state.replace(filter_x=jnp.where(finite, x, state.filter_x),
-                         filter_P=jnp.where(finite, P, state.filter_P), nis=nis,
-                         nis_run=nis_run, diverged=state.diverged | blown)
+    new = watch(Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged),
+                x, P, nis, WatchLimits(params.max_covariance_trace, params.nis_threshold,
+                                       params.nis_patience))
+    return state.replace(filter_x=new.x, filter_P=new.P, nis=new.nis, nis_run=new.nis_run,
+                         diverged=new.diverged)
 
 
 def ekf_prior(params: OrbitParams) -> tuple[jax.Array, jax.Array]:
