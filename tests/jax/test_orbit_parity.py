@@ -22,34 +22,13 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
+from jax_parity import QueuedNormals, flat, flat_jax, relative_error  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.envs._base import psd_sqrt  # noqa: E402
 from fir_gym.jax import orbit as jorbit  # noqa: E402
 
 RTOL = 1e-9
-
-
-class QueuedNormals:
-    """Stands in for the plant's ``np_random``: serves the queued standard normals, in
-    order, each call's shape checked."""
-
-    def __init__(self) -> None:
-        self.queue: list[np.ndarray] = []
-
-    def standard_normal(self, size: Any = None) -> np.ndarray:
-        z = self.queue.pop(0)
-        want = (size,) if isinstance(size, int) else tuple(size)
-        assert z.shape == want, f"the plant drew {want}, the queue had {z.shape}"
-        return z.copy()
-
-
-def flat(obs: Any) -> np.ndarray:
-    """An observation as one float64 vector (a dict's entries in key order)."""
-    if isinstance(obs, dict):
-        return np.concatenate([np.asarray(obs[key], dtype=np.float64).reshape(-1)
-                               for key in sorted(obs)])
-    return np.asarray(obs, dtype=np.float64)
 
 
 def numpy_env(kind: str, observation: str = "estimate", **kwargs: Any) -> gym.Env:
@@ -143,23 +122,6 @@ def run_jax(kind: str, actions: np.ndarray, ref: dict[str, Any], params: Any,
             "P": np.concatenate([np.asarray(s0.filter_P)[None], fP]),
             "diverged": np.concatenate([[bool(s0.diverged)], diverged]),
             "nis": np.concatenate([[float(s0.nis)], nis])}
-
-
-def flat_jax(obs: Any) -> Any:
-    """:func:`flat` inside a trace."""
-    if isinstance(obs, dict):
-        return jnp.concatenate([jnp.reshape(obs[key], (-1,)) for key in sorted(obs)])
-    return obs
-
-
-def relative_error(got: np.ndarray, want: np.ndarray) -> float:
-    """``max |got − want| / |want|`` elementwise (where ``want`` is 0, ``got`` must be 0)."""
-    diff = np.abs(got - want)
-    scale = np.abs(want)
-    if np.any((scale == 0) & (diff > 0)):
-        return float("inf")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return float(np.nanmax(np.where(scale > 0, diff / scale, 0.0)))
 
 
 def hover_actions(n: int, seed: int) -> np.ndarray:
