@@ -13,7 +13,9 @@ first call, long after any ``with`` block would have closed; gymnax environments
 unchanged in x64 mode (their default dtypes become 64-bit). Every environment checks the
 flag when it is built and when it traces, and raises if it was turned off later.
 
-Environments: :class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000, simulation 1).
+Environments: :func:`make` (``fir_gym.jax.make(env_id, kind, **kwargs)`` → ``(env, params)``,
+as ``gymnax.make``) over :data:`PLANTS` (:mod:`fir_gym.jax.registry`):
+:class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000, simulation 1).
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from .orbit import (  # noqa: E402
     orbit_params,
     orbit_reset_noise,
 )
+from .registry import PLANTS, make  # noqa: E402
 
-__all__ = ["Orbit", "OrbitNoise", "OrbitParams", "OrbitResetNoise", "OrbitState", "orbit_noise",
-           "orbit_params", "orbit_reset_noise", "require_x64"]
+__all__ = ["PLANTS", "Orbit", "OrbitNoise", "OrbitParams", "OrbitResetNoise", "OrbitState",
+           "make", "orbit_noise", "orbit_params", "orbit_reset_noise", "require_x64"]

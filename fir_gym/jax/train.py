@@ -66,10 +66,10 @@ from rejax.algos.algorithm import register_init  # noqa: E402
 from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
-from . import orbit as orbit_module  # noqa: E402  (after fir_gym.jax turned x64 on)
+from .registry import PLANTS, kinds_line, make  # noqa: E402  (after fir_gym.jax: x64 on)
 
 #: the env ids and kinds the JAX backend trains
-SUPPORTED: dict[str, tuple[str, ...]] = {"fir_gym/Orbit-v0": orbit_module.KINDS}
+SUPPORTED: dict[str, tuple[str, ...]] = {env_id: p.kinds for env_id, p in PLANTS.items()}
 #: the parts of the recipe not matched (the module docstring says why)
 UNMATCHED = (
     "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
@@ -91,9 +91,8 @@ CACHE_ENV = "FIR_GYM_JAX_CACHE"
 
 
 def supported_line() -> str:
-    """One line naming what the JAX backend trains."""
-    return "; ".join(f"{env_id} with kind {', '.join(kinds)}" for env_id, kinds in
-                     SUPPORTED.items())
+    """One line naming what the JAX backend trains (:func:`fir_gym.jax.registry.kinds_line`)."""
+    return kinds_line()
 
 
 def check_supported(env_id: str, kind: str, observation: str = "estimate") -> None:
@@ -337,7 +336,7 @@ def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None
              ) -> tuple[Any, Any]:
     """``(gymnax env, params)`` of a supported plant and kind."""
     check_supported(env_id, kind)
-    return orbit_module.Orbit(kind), orbit_module.orbit_params(**(env_kwargs or {}))
+    return make(env_id, kind, **(env_kwargs or {}))
 
 
 def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:

@@ -1,0 +1,61 @@
+"""The JAX environments by Gymnasium id: ``fir_gym.jax.make(env_id, kind, **kwargs)``.
+
+gymnax's own ``gymnax.make(name)`` returns ``(env, params)``; so does :func:`make`, for the
+fir-gym plants this backend has, each with the observation kinds it supports and the
+numpy env's keywords (``gym.make(env_id, **kwargs)``'s, ``nominal=`` included) turned into
+its validated params by the plant's builder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class JaxPlant:
+    """One plant of the JAX backend: its environment class (built with ``kind``), its params
+    builder (the numpy env's keywords) and its kinds, the estimator kind last."""
+
+    env_id: str
+    env_class: Callable[[str], Any]
+    params: Callable[..., Any]
+    kinds: tuple[str, ...]
+
+
+def _plants() -> dict[str, JaxPlant]:
+    from . import orbit
+
+    plants = [JaxPlant("fir_gym/Orbit-v0", orbit.Orbit, orbit.orbit_params, orbit.KINDS)]
+    return {p.env_id: p for p in plants}
+
+
+#: the plants of the JAX backend by Gymnasium id
+PLANTS: dict[str, JaxPlant] = _plants()
+
+
+def kinds_line() -> str:
+    """One line naming every plant and its kinds (for error messages)."""
+    return "; ".join(f"{p.env_id} with kind {', '.join(p.kinds)}" for p in PLANTS.values())
+
+
+def make(env_id: str, kind: str | None = None, **env_kwargs: Any) -> tuple[Any, Any]:
+    """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's estimator
+    kind), the params built from the numpy env's keywords ``env_kwargs``.
+
+    Raises:
+        ValueError: an unknown plant or kind (naming what there is), or a keyword the
+            plant's builder refuses (naming it).
+    """
+    plant = PLANTS.get(env_id)
+    if plant is None:
+        raise ValueError(f"env_id must be one of {sorted(PLANTS)}; got {env_id!r}")
+    kind = plant.kinds[-1] if kind is None else kind
+    if kind not in plant.kinds:
+        raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
+    try:
+        params = plant.params(**env_kwargs)
+    except TypeError as error:                       # an unknown keyword
+        raise ValueError(f"{env_id}: {error}") from None
+    return plant.env_class(kind), params
