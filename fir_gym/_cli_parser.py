@@ -126,10 +126,11 @@ def _add_training_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def _add_runner_options(p: argparse.ArgumentParser, what: str) -> None:
-    p.add_argument("--backend", default="serial", choices=["serial", "joblib", "dask"],
+def _add_runner_options(p: argparse.ArgumentParser, what: str, jax: str = "") -> None:
+    p.add_argument("--backend", default="serial",
+                   choices=["serial", "joblib", "dask"] + (["jax"] if jax else []),
                    help=f"where the {what} run (default: serial, this process; dask needs "
-                        'the cluster extra: pip install ".[cluster]")')
+                        'the cluster extra: pip install ".[cluster]")' + jax)
     p.add_argument("--jobs", type=positive_int, default=None,
                    help="worker processes for joblib/dask (default: the CPUs)")
     p.add_argument("--scheduler", default=None,
@@ -237,7 +238,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plants", default=None,
                    help="comma-separated subset of the plants (default: all five)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    _add_runner_options(p, "(plant, kind, seed) jobs")
+    p.add_argument("--compare-with", default=None, metavar="DIR",
+                   help="with --backend jax: an SB3 benchmark's --out folder, whose rows "
+                        "stand beside the JAX rows (default: none)")
+    _add_runner_options(p, "(plant, kind, seed) jobs",
+                        jax="; jax: the learned kinds the JAX backend has (true, measurement, "
+                            "the plant's filter), all seeds of a plant and kind in one "
+                            'compiled program (the jax extra: pip install ".[jax]")')
 
     p = command("benchmark-robustness",
                 "which estimator belongs in a closed loop when the model is wrong and the "

@@ -315,13 +315,36 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
+    plants = [p.strip() for p in args.plants.split(",")] if args.plants else None
+    if args.backend == "jax":
+        return benchmark_jax(args, plants)
+    if args.compare_with:
+        raise ValueError("--compare-with puts an SB3 benchmark beside the jax backend's: give "
+                         "it with --backend jax")
     from .training.benchmark import print_report, run_benchmark
 
-    plants = [p.strip() for p in args.plants.split(",")] if args.plants else None
     with _runner(args) as runner:
         report = run_benchmark(args.out, quick=args.quick, runner=runner,
                                seeds=args.seeds, plants=plants)
     print_report(report)
+    print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
+    return 0
+
+
+def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
+    """``fir-gym benchmark-controllers --backend jax``: :func:`fir_gym.jax.benchmark.
+    run_benchmark` (the learned kinds the JAX backend has), its tables printed."""
+    from ._extras import require
+
+    require("jax", "gymnax", "rejax")                  # a missing extra: its one line
+    if args.jobs or args.scheduler:
+        raise ValueError("--backend jax runs every seed of a plant and kind in one program in "
+                         "this process: it takes no --jobs or --scheduler")
+    from .jax.benchmark import markdown, run_benchmark
+
+    report = run_benchmark(args.out, quick=args.quick, seeds=args.seeds, plants=plants,
+                           compare_with=args.compare_with, progress=not args.no_progress)
+    print(markdown(report))
     print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
     return 0
 

@@ -53,6 +53,8 @@ def run_blocked(blocked, argv):
      'pip install ".[cluster]"'),
     (["imageio"], ["watch", "--env", "fir_gym/Orbit-v0", "--estimator", "ekf", "--out",
                    "x.gif"], 'pip install ".[video]"'),
+    (["jax", "gymnax", "rejax"], ["benchmark-controllers", "--backend", "jax", "--quick",
+                                  "--out", "RUN"], 'pip install ".[jax]"'),
 ])
 def test_a_missing_extra_names_the_pip_install_that_fixes_it(tmp_path, blocked, argv, install):
     argv = [str(tmp_path / a) if a in ("RUN", "x.gif") else a for a in argv]
@@ -218,3 +220,8 @@ def test_json_of_speed_is_untouched_by_the_cli_parser(tmp_path, monkeypatch):
     out = tmp_path / "s.json"
     assert main(["speed", "fir", "--quick", "--json", str(out)]) == 0
     assert json.loads(out.read_text())["fir"] == {"x": 1}
+
+
+def test_benchmark_options_of_the_other_backend_are_refused_in_one_line(capsys, tmp_path):
+    one_line(capsys, ["benchmark-controllers", "--compare-with", str(tmp_path), "--out",
+                      str(tmp_path / "b")], "--compare-with", "--backend jax")

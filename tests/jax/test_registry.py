@@ -36,7 +36,7 @@ def test_reset_and_step_run_jitted_and_vmapped(env_id: str, kind: str) -> None:
     for k in range(steps):
         keys = jax.random.split(jax.random.PRNGKey(k + 1), n)
         action = jnp.full((n, *space.shape), 0.1)
-        obs, state, reward, terminated, truncated, info = step(keys, state, action, params)
+        obs, state, reward, terminated, truncated, _ = step(keys, state, action, params)
         for leaf in jax.tree.leaves(obs):
             assert leaf.shape[0] == n and np.isfinite(np.asarray(leaf)).all()
         assert reward.shape == (n,) and np.isfinite(np.asarray(reward)).all()

@@ -1,0 +1,158 @@
+"""``fir-gym benchmark-controllers --backend jax``: the controller benchmark's learned kinds
+that the JAX backend has, every seed of a (plant, kind) in one compiled program.
+
+The plan is the SB3 benchmark's (:data:`fir_gym.training.benchmark.PLANTS`: the plants'
+episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` seeds,
+:data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes), restricted to the plants
+of :data:`fir_gym.jax.registry.PLANTS` and to the kinds both have (``true``,
+``measurement`` and the plant's own filter, ``ekf`` or ``kf``); PPO with the shipped recipe
+(:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds' mean returns and
+its 95 % interval from the same bootstrap as the SB3 benchmark's
+(:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), the compile and
+training times and the training rate. Given an SB3 benchmark's folder
+(``--compare-with``), each row stands beside the SB3 row of the same plant and kind, with
+the verdict the issue asks for: is the JAX IQM inside the SB3 interval? The two backends'
+evaluation episodes are drawn from different generators (the same distribution, not the
+same draws).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from fir_gym.tables import format_table
+from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS
+from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
+
+from .registry import PLANTS as JAX_PLANTS
+from .train import save, train
+
+#: the benchmark's learned kinds the JAX backend trains (the filter: the plant's own)
+JAX_KINDS = ("true", "measurement", "ekf", "kf")
+
+
+def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
+                   plants: list[str] | None = None, kinds: list[str] | None = None
+                   ) -> list[dict[str, Any]]:
+    """Every (plant, kind) job: ``env_id``, ``kind``, ``seeds``, ``steps``, ``env_kwargs``,
+    ``episodes``. Refuses a plant the JAX backend or the benchmark does not have."""
+    chosen = list(plants) if plants else [p for p in PLANTS if p in JAX_PLANTS]
+    for env_id in chosen:
+        if env_id not in PLANTS or env_id not in JAX_PLANTS:
+            raise ValueError(f"plants must be among the benchmark's plants the jax backend "
+                             f"has ({', '.join(p for p in PLANTS if p in JAX_PLANTS)}); got "
+                             f"{env_id!r}")
+    n_seeds = seeds or (QUICK["seeds"] if quick else SEEDS)
+    jobs = []
+    for env_id in chosen:
+        spec = PLANTS[env_id]
+        have = [k for k in JAX_PLANTS[env_id].kinds if k in JAX_KINDS]
+        for kind in have if kinds is None else [k for k in kinds if k in have]:
+            jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
+                         "steps": QUICK["steps"] if quick else spec["steps"],
+                         "env_kwargs": dict(spec["env_kwargs"]),
+                         "episodes": QUICK["episodes"] if quick else EPISODES})
+    return jobs
+
+
+def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = None,
+                  plants: list[str] | None = None, kinds: list[str] | None = None,
+                  compare_with: str | Path | None = None, progress: bool = True
+                  ) -> dict[str, Any]:
+    """Train every job of :func:`benchmark_plan`, save each run folder under ``out``, and
+    write ``out/results.json`` and ``out/BENCHMARK.md``; the report dict."""
+    import sys
+
+    sb3 = _sb3_tables(compare_with) if compare_with else None
+    out = Path(out)
+    jobs = benchmark_plan(quick=quick, seeds=seeds, plants=plants, kinds=kinds)
+    start = time.perf_counter()
+    rows = []
+    for i, job in enumerate(jobs):
+        if progress:
+            print(f"[{i + 1}/{len(jobs)}] {job['env_id']} {job['kind']}: {job['seeds']} "
+                  f"seed(s) x {job['steps']} steps", file=sys.stderr, flush=True)
+        result = train(job["env_id"], job["kind"], job["seeds"], steps=job["steps"],
+                       env_kwargs=job["env_kwargs"], episodes=job["episodes"])
+        save(result, out / job["env_id"].split("/")[-1] / job["kind"])
+        rows.append({"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
+                     "episode_returns": result.final_returns,
+                     "compile_seconds": result.compile_seconds,
+                     "train_seconds": result.train_seconds,
+                     "steps_trained": result.steps_trained,
+                     "steps_per_second": result.steps_trained * len(result.seeds)
+                     / result.train_seconds})
+    tables = summarise(rows, sb3)
+    report = {"backend": "jax", "quick": quick, "seconds": time.perf_counter() - start,
+              "compare_with": str(compare_with) if compare_with else None, "tables": tables}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "BENCHMARK.md").write_text(markdown(report) + "\n")
+    return report
+
+
+def _sb3_tables(folder: str | Path) -> dict[str, dict[str, dict[str, Any]]]:
+    """The SB3 benchmark's rows by plant and kind, from its ``results.json``."""
+    path = Path(folder) / "results.json"
+    if not path.is_file():
+        raise ValueError(f"--compare-with {folder} is not a benchmark-controllers folder "
+                         "(it has no results.json)")
+    data = json.loads(path.read_text())
+    return {env_id: {r["kind"]: r for r in table}
+            for env_id, table in data.get("tables", {}).items()}
+
+
+def summarise(rows: list[dict[str, Any]], sb3: dict[str, dict[str, dict[str, Any]]] | None
+              ) -> dict[str, list[dict[str, Any]]]:
+    """Per plant, one row per kind: the IQM over seeds and its 95 % interval (episodes, then
+    seeds, resampled), times, and the SB3 row beside it where given."""
+    tables: dict[str, list[dict[str, Any]]] = {}
+    for env_id in dict.fromkeys(r["env_id"] for r in rows):
+        mine = [r for r in rows if r["env_id"] == env_id]
+        draws = episode_bootstrap({r["kind"]: r["episode_returns"] for r in mine})
+        table = []
+        for r in mine:
+            centre = iqm([sum(e) / len(e) for e in r["episode_returns"]])
+            low, high = percentile_interval(draws[r["kind"]])
+            row = {**r, "iqm": centre, "low": low, "high": high}
+            other = (sb3 or {}).get(env_id, {}).get(r["kind"])
+            if other is not None:
+                row.update(sb3_iqm=other["iqm"], sb3_low=other["low"], sb3_high=other["high"],
+                           sb3_seeds=other.get("seeds"),
+                           inside=bool(other["low"] <= centre <= other["high"]))
+            table.append(row)
+        tables[env_id] = table
+    return tables
+
+
+def markdown(report: dict[str, Any]) -> str:
+    """The report as Markdown: one table per plant."""
+    compare = report.get("compare_with")
+    parts = ["**Benchmark: controllers on estimates, JAX backend** (PPO with the shipped "
+             "recipe, every seed of a plant and kind in one compiled program; IQM of the "
+             "seeds' mean returns over the evaluation episodes, 95 % interval resampling "
+             "episodes then seeds" + ("; `--quick`: the numbers mean nothing" if
+                                      report.get("quick") else "") + ")."]
+    if compare:
+        parts.append(f"Beside it, the stable-baselines3 backend's row of the same plant and "
+                     f"kind from `{compare}`; *inside*: the JAX IQM lies in the SB3 interval.")
+    for env_id, table in report["tables"].items():
+        headers = ["kind", "seeds", "IQM return [95% CI]", "compile s", "train s",
+                   "env-steps/s"]
+        if compare:
+            headers += ["SB3 IQM [95% CI]", "inside"]
+        lines = []
+        for r in table:
+            line = [r["kind"], len(r["seeds"]), f"{r['iqm']:.4g} [{r['low']:.4g}, "
+                    f"{r['high']:.4g}]", f"{r['compile_seconds']:.1f}",
+                    f"{r['train_seconds']:.1f}", f"{r['steps_per_second']:.3g}"]
+            if compare:
+                line += ([f"{r['sb3_iqm']:.4g} [{r['sb3_low']:.4g}, {r['sb3_high']:.4g}]",
+                          "yes" if r["inside"] else "no"] if "sb3_iqm" in r else ["—", "—"])
+            lines.append(line)
+        parts.append(f"*{env_id}*\n\n" + format_table(headers, lines, markdown=True))
+    parts.append(f"Whole run: {report['seconds']:.0f} s, compilation included.")
+    return "\n\n".join(parts)

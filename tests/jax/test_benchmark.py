@@ -1,0 +1,57 @@
+"""``fir-gym benchmark-controllers --backend jax`` (fir_gym.jax.benchmark): the plan is the
+SB3 benchmark's restricted to what the JAX backend has, the report's statistics are the
+SB3 benchmark's, and an SB3 folder's rows stand beside the JAX rows with the verdict."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("jax")
+pytest.importorskip("gymnax")
+pytest.importorskip("rejax")
+
+from fir_gym.jax import benchmark
+from fir_gym.training import benchmark as sb3_benchmark
+from fir_gym.training.stats import iqm
+
+
+def test_the_plan_is_the_sb3_benchmarks_for_the_plants_and_kinds_jax_has() -> None:
+    jobs = benchmark.benchmark_plan()
+    assert jobs
+    for job in jobs:
+        spec = sb3_benchmark.PLANTS[job["env_id"]]
+        assert job["steps"] == spec["steps"] and job["env_kwargs"] == spec["env_kwargs"]
+        assert job["seeds"] == sb3_benchmark.SEEDS and job["episodes"] == sb3_benchmark.EPISODES
+        assert job["kind"] in sb3_benchmark.KINDS or job["kind"] == "kf"
+    assert {j["kind"] for j in jobs if j["env_id"] == "fir_gym/Orbit-v0"} == {
+        "true", "measurement", "ekf"}
+    quick = benchmark.benchmark_plan(quick=True, seeds=3, plants=["fir_gym/Orbit-v0"],
+                                     kinds=["ekf"])
+    assert [(j["kind"], j["seeds"], j["steps"]) for j in quick] == [
+        ("ekf", 3, sb3_benchmark.QUICK["steps"])]
+    with pytest.raises(ValueError, match="plants must be"):
+        benchmark.benchmark_plan(plants=["fir_gym/NoSuchPlant-v0"])
+
+
+def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
+    sb3 = tmp_path / "sb3"
+    sb3.mkdir()
+    (sb3 / "results.json").write_text(json.dumps({"tables": {"fir_gym/Orbit-v0": [
+        {"kind": "true", "iqm": -50.0, "low": -1e9, "high": 0.0, "seeds": 5}]}}))
+    report = benchmark.run_benchmark(tmp_path / "jax", quick=True, seeds=2,
+                                     plants=["fir_gym/Orbit-v0"], kinds=["true"],
+                                     compare_with=sb3, progress=False)
+    (row,) = report["tables"]["fir_gym/Orbit-v0"]
+    assert row["kind"] == "true" and row["seeds"] == [0, 1]
+    assert row["iqm"] == pytest.approx(iqm([sum(e) / len(e) for e in row["episode_returns"]]))
+    assert row["low"] <= row["iqm"] <= row["high"]
+    assert row["inside"] is True and row["sb3_iqm"] == -50.0       # inside (-1e9, 0]
+    text = (tmp_path / "jax" / "BENCHMARK.md").read_text()
+    assert "fir_gym/Orbit-v0" in text and "inside" in text and "yes" in text
+    assert (tmp_path / "jax" / "Orbit-v0" / "true" / "results.json").is_file()
+    with pytest.raises(ValueError, match="compare-with"):
+        benchmark.run_benchmark(tmp_path / "x", compare_with=tmp_path / "nothing",
+                                progress=False)
