@@ -21,97 +21,12 @@ Needs the ``jax`` extra::
 from __future__ import annotations
 
 import argparse
-import time
-import warnings
-from typing import Any
-
-import gymnasium as gym
-import numpy as np
 
 import fir_gym  # noqa: F401  (registers the ids)
+from fir_gym.benchmarks.jax_training import MODES
+from fir_gym.benchmarks.jax_training import jax_stepping_rate as jax_rate
+from fir_gym.benchmarks.jax_training import numpy_stepping_rate as numpy_rate
 from fir_gym.machine import cores, cpu_model, load_average
-
-#: the policy both envs run: hover thrust plus a proportional correction of the estimated r
-HOVER, GAIN, R_REF = 0.311, 0.5, 8.0
-
-
-def policy(obs: np.ndarray) -> np.ndarray:
-    """The numpy env's actions from its estimates ``(B, 2)`` (float32, as a policy's)."""
-    return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
-
-
-#: what a JAX step is: gymnax's ``step`` (noise drawn, auto-reset: what training runs),
-#: ``step_env`` (noise drawn, no auto-reset) or ``step_with_noise`` (zero noise given: the
-#: plant and the filter alone)
-MODES = ("step", "step_env", "step_with_noise")
-
-
-def jax_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
-             mode: str = "step") -> tuple[float, float]:
-    """(env-steps/s of the jitted, vmapped Orbit+EKF env, compile seconds); ``prng`` is the
-    keys' implementation (JAX's default ``threefry2x32``, or ``rbg``/``unsafe_rbg``), ``mode``
-    one of :data:`MODES`."""
-    import jax
-    import jax.numpy as jnp
-
-    from fir_gym.jax.orbit import Orbit, OrbitNoise
-
-    env = Orbit("ekf")
-    params = env.default_params
-    zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
-
-    def one(key: Any) -> Any:
-        k_reset, k_steps = jax.random.split(key)
-        obs, state = env.reset(k_reset, params)
-
-        def body(carry: Any, key: Any) -> Any:
-            obs, state = carry
-            action = jnp.clip(HOVER - GAIN * (obs[:1] - R_REF), -1.0, 1.0)
-            if mode == "step":
-                obs, state, reward, _, _, _ = env.step(key, state, action, params)
-            elif mode == "step_env":
-                obs, state, reward, _, _ = env.step_env(key, state, action, params)
-            else:
-                obs, state, reward, _, _ = env.step_with_noise(state, action, zero, params)
-            return (obs, state), reward
-
-        (_, state), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
-        return state.filter_x, rewards.sum()
-
-    run = jax.jit(jax.vmap(one))
-    keys = jax.random.split(jax.random.key(0, impl=prng), n_envs)
-    start = time.perf_counter()
-    jax.block_until_ready(run(keys))
-    compile_s = time.perf_counter() - start
-    best = np.inf
-    for rep in range(reps):
-        keys = jax.random.split(jax.random.key(rep + 1, impl=prng), n_envs)
-        start = time.perf_counter()
-        jax.block_until_ready(run(keys))
-        best = min(best, time.perf_counter() - start)
-    return n_envs * steps / best, compile_s
-
-
-def numpy_rate(n_envs: int, steps: int, reps: int) -> float:
-    """Env-steps/s of the native vector env with the batched EKF (best of ``reps``)."""
-    from fir_gym.wrappers import VectorEstimatorObservation
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        env = VectorEstimatorObservation(
-            gym.make_vec("fir_gym/Orbit-v0", num_envs=n_envs,
-                         vectorization_mode="vector_entry_point"), "ekf")
-        obs, _ = env.reset(seed=0)
-        for _ in range(3):                                   # warm up (numba, caches)
-            obs = env.step(policy(obs))[0]
-        best = np.inf
-        for _ in range(reps):
-            start = time.perf_counter()
-            for _ in range(steps):
-                obs = env.step(policy(obs))[0]
-            best = min(best, time.perf_counter() - start)
-        env.close()
-    return n_envs * steps / best
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -29,7 +29,8 @@ fir``, default all; ``fir-gym bench`` is the same command under its old name) pr
    section 1 also prints each batched filter's gain over its own numpy path (the
    compiled kernels off).
 6. **training** — stable-baselines3 on the batched plants (:mod:`.training`; needs the
-   ``rl`` extra).
+   ``rl`` extra) and, with the ``jax`` extra, the JAX backend against it: PPO and raw
+   stepping of Orbit-v0 with its EKF (:mod:`.jax_training`).
 7. **fir** — the FIR gains' cost against the horizon ``N`` (two-stage recursion, batch
    formula, time-varying filter step) with fitted exponents (:func:`.fir.growth`).
 

@@ -1,4 +1,5 @@
-"""Speed of stable-baselines3 on fir-gym's batched plants (``fir-gym speed training``).
+"""Speed of stable-baselines3 on fir-gym's batched plants (``fir-gym speed training``);
+with the ``jax`` extra, also the JAX backend's against it (:mod:`.jax_training`).
 
 Two targets, each a ratio of env-steps per second measured in the same run:
 
@@ -181,13 +182,17 @@ def _train_speed(quick: bool) -> dict[str, Any]:
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    """Both figures (needs the ``rl`` extra); ``{"skipped": reason}`` without it."""
+    """Both figures (needs the ``rl`` extra; ``{"skipped": reason}`` without it), and the
+    JAX backend's (:mod:`.jax_training`, with the ``jax`` extra) under ``"jax"``."""
+    from . import jax_training
+
     try:
         import stable_baselines3  # noqa: F401
         import torch  # noqa: F401
     except ImportError as err:
         return {"skipped": f"needs the rl extra ({err.name} is missing)"}
-    return {"step": _step_envs(quick), "train": _train_speed(quick)}
+    return {"step": _step_envs(quick), "train": _train_speed(quick),
+            "jax": jax_training.run(quick)}
 
 
 def print_results(res: dict[str, Any]) -> None:
@@ -211,6 +216,10 @@ def print_results(res: dict[str, Any]) -> None:
     print("   floor: what the fast path cannot skip (the plants' own batched step and the "
           "EKF's), or PPO's own cost per sample (stable-baselines3 and torch on a VecEnv "
           "whose step is free); ceiling: the best ratio that floor allows")
+    if "jax" in res:
+        from . import jax_training
+
+        jax_training.print_results(res["jax"])
 
 
 def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:
@@ -219,7 +228,9 @@ def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float |
         return []
     s, t = res["step"], res["train"]
     step_ceiling = s.get("ceiling")
+    from . import jax_training
+
     return [("make_sb3_vec_env(Orbit, 16, ekf) / DummyVecEnv steps per second",
              s["ratio"], 10.0, step_ceiling),
             ("PPO on make_sb3_vec_env / on DummyVecEnv steps per second",
-             t["ratio"], 3.0, t["ceiling"])]
+             t["ratio"], 3.0, t["ceiling"]), *jax_training.targets(res.get("jax", {}))]

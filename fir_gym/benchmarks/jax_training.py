@@ -1,0 +1,289 @@
+"""Speed of the JAX backend against the numpy one (``fir-gym speed training``, issue 28).
+
+Two ratios, each of env-steps per second measured in the same run as its reference:
+
+* **PPO**: rejax's PPO on :class:`fir_gym.jax.orbit.Orbit` observing its EKF, the shipped
+  recipe (``ppo.yml``: 16 envs × 256 steps, 4 minibatches, 10 epochs, normalisation), the
+  training iterations as one jitted program timed after compilation (steady state: the
+  faster of two runs on fresh keys), against stable-baselines3's PPO on the numpy
+  Orbit-v0 with its batched EKF (:func:`fir_gym.training.make_sb3_vec_env`, torch at one
+  thread, as ``fir-gym train`` runs it) — target ≥ 6;
+* **stepping**: the JAX Orbit-v0 + EKF, gymnax's auto-resetting ``step`` vmapped over 2048
+  envs and scanned over the steps (a proportional policy on the estimate), against the
+  native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
+  (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 —
+  target ≥ 2. The same JAX env stepped with the noise given (``step_with_noise``, no key
+  draws, no auto-reset) is the floor: the plant and the filter alone.
+
+The PPO ratio's floor is PPO's own cost in JAX: the same program on :func:`free_env`, an
+environment whose step costs nothing — ``free / SB3`` is the best ratio any JAX plant could
+reach at this recipe on this machine.
+
+The functions are also the measurements of ``scripts/jax_stepping_speed.py`` and
+``scripts/jax_training_speed.py``, which take more options.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Any
+
+import numpy as np
+
+ENV_ID, KIND = "fir_gym/Orbit-v0", "ekf"
+#: the proportional policy both stepping measurements run: hover thrust + gain (8 − r̂)
+HOVER, GAIN, R_REF = 0.311, 0.5, 8.0
+#: what a JAX step is: gymnax's ``step`` (noise drawn, auto-reset: what training runs),
+#: ``step_env`` (noise drawn, no auto-reset) or ``step_with_noise`` (zero noise given)
+MODES = ("step", "step_env", "step_with_noise")
+JAX_ENVS = 2048
+NUMPY_BATCHES = (256, 1024, 4096)
+
+
+def policy(obs: np.ndarray) -> np.ndarray:
+    """The numpy env's actions from its estimates ``(B, 2)`` (float32, as a policy's)."""
+    return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
+
+
+def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
+                      mode: str = "step") -> tuple[float, float]:
+    """(env-steps/s of the jitted, vmapped Orbit+EKF env — best of ``reps`` —, compile
+    seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`."""
+    import jax
+    import jax.numpy as jnp
+
+    from fir_gym.jax.orbit import Orbit, OrbitNoise
+
+    env = Orbit("ekf")
+    params = env.default_params
+    zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
+
+    def one(key: Any) -> Any:
+        k_reset, k_steps = jax.random.split(key)
+        obs, state = env.reset(k_reset, params)
+
+        def body(carry: Any, key: Any) -> Any:
+            obs, state = carry
+            action = jnp.clip(HOVER - GAIN * (obs[:1] - R_REF), -1.0, 1.0)
+            if mode == "step":
+                obs, state, reward, _, _, _ = env.step(key, state, action, params)
+            elif mode == "step_env":
+                obs, state, reward, _, _ = env.step_env(key, state, action, params)
+            else:
+                obs, state, reward, _, _ = env.step_with_noise(state, action, zero, params)
+            return (obs, state), reward
+
+        (_, state), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
+        return state.filter_x, rewards.sum()
+
+    run = jax.jit(jax.vmap(one))
+    keys = jax.random.split(jax.random.key(0, impl=prng), n_envs)
+    start = time.perf_counter()
+    jax.block_until_ready(run(keys))
+    compile_s = time.perf_counter() - start
+    best = np.inf
+    for rep in range(reps):
+        keys = jax.random.split(jax.random.key(rep + 1, impl=prng), n_envs)
+        start = time.perf_counter()
+        jax.block_until_ready(run(keys))
+        best = min(best, time.perf_counter() - start)
+    return n_envs * steps / best, compile_s
+
+
+def numpy_stepping_rate(n_envs: int, steps: int, reps: int) -> float:
+    """Env-steps/s of the native vector env with the batched EKF (best of ``reps``)."""
+    import gymnasium as gym
+
+    from fir_gym.wrappers import VectorEstimatorObservation
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = VectorEstimatorObservation(
+            gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point"),
+            "ekf")
+        obs, _ = env.reset(seed=0)
+        for _ in range(3):                                   # warm up (numba, caches)
+            obs = env.step(policy(obs))[0]
+        best = np.inf
+        for _ in range(reps):
+            start = time.perf_counter()
+            for _ in range(steps):
+                obs = env.step(policy(obs))[0]
+            best = min(best, time.perf_counter() - start)
+        env.close()
+    return n_envs * steps / best
+
+
+def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: bool = False,
+                 n_envs: int | None = None) -> dict[str, Any]:
+    """``{"steps", "seconds", "compile_seconds", "rate"}`` of JAX PPO (``seeds`` vmapped):
+    the training iterations of ``steps`` as one program, the faster of two timed runs;
+    ``free``: on :func:`free_env` instead of Orbit-v0 (PPO's own cost); ``n_envs``: the
+    recipe's 16 envs replaced (the rollout grows with it, the minibatch size stays)."""
+    import jax
+    import jax.numpy as jnp
+
+    from fir_gym.jax import train as jt
+
+    if cache:
+        jt.enable_compilation_cache(cache)
+    rec = jt.recipe(ENV_ID, steps=steps, n_envs=n_envs)
+    if free:
+        env = free_env()
+        params = env.default_params
+    else:
+        env, params = jt.make_env(ENV_ID, KIND)
+    algo = jt.make_algorithm(env, params, rec)
+
+    def one(key: Any) -> Any:
+        ts = algo.init_state(key)
+        ts = jax.lax.fori_loop(0, rec.iterations, lambda _, ts: algo.train_iteration(ts), ts)
+        return ts.actor_ts.params
+
+    program = jax.jit(jax.vmap(one))
+    keys = [jnp.stack([jax.random.PRNGKey(1000 * r + s) for s in range(seeds)])
+            for r in range(3)]
+    start = time.perf_counter()
+    compiled = program.lower(keys[0]).compile()
+    compile_seconds = time.perf_counter() - start
+    best = float("inf")
+    for key in keys[1:]:
+        start = time.perf_counter()
+        jax.block_until_ready(compiled(key))
+        best = min(best, time.perf_counter() - start)
+    trained = rec.iterations * rec.rollout * seeds
+    return {"steps": trained, "seconds": best, "compile_seconds": compile_seconds,
+            "rate": trained / best}
+
+
+def free_env() -> Any:
+    """A gymnax environment whose step costs (almost) nothing, with Orbit's spaces (two
+    observations, one action in ``[-1, 1]``, 1000-step episodes): PPO's own cost per sample
+    in JAX, the floor of the PPO ratio."""
+    import gymnax.environments.environment as gymnax_env
+    import jax.numpy as jnp
+    from flax import struct
+    from gymnax.environments import spaces
+
+    @struct.dataclass
+    class State(gymnax_env.EnvState):
+        time: Any
+
+    class Free(gymnax_env.Environment[Any, gymnax_env.EnvParams]):
+        @property
+        def default_params(self) -> gymnax_env.EnvParams:
+            return gymnax_env.EnvParams(max_steps_in_episode=1000)
+
+        def reset_env(self, key: Any, params: Any) -> Any:
+            return jnp.zeros(2), State(time=jnp.asarray(0))
+
+        def step_env(self, key: Any, state: Any, action: Any, params: Any) -> Any:
+            new = State(time=state.time + 1)
+            return jnp.zeros(2) + action[0], new, -jnp.abs(action[0]), jnp.asarray(False), {}
+
+        def is_terminated(self, state: Any, params: Any) -> Any:
+            return jnp.asarray(False)
+
+        def observation_space(self, params: Any) -> Any:
+            return spaces.Box(-jnp.inf, jnp.inf, (2,), jnp.float64)
+
+        def action_space(self, params: Any = None) -> Any:
+            return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
+
+    return Free()
+
+
+def sb3_ppo_rate(steps: int) -> dict[str, Any]:
+    """``{"steps", "seconds", "setup_seconds", "rate"}`` of stable-baselines3's PPO on the
+    numpy Orbit-v0 with its batched EKF (one warm-up rollout first, not timed)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from fir_gym.training.run import RunConfig, build_training_env
+
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    config = RunConfig(ENV_ID, KIND, steps=steps)
+    settings = config.settings()
+    venv = build_training_env(config, 0, None, settings["n_envs"])
+    venv = VecNormalize(venv, gamma=settings["algo_kwargs"].get("gamma", 0.99),
+                        **settings["normalize"])
+    model = PPO(settings["policy"], venv, seed=0, device="cpu", verbose=0,
+                **settings["algo_kwargs"])
+    rollout = model.n_steps * model.n_envs
+    model.learn(rollout)                                  # set-up and one warm-up rollout
+    setup = time.perf_counter() - start
+    start = time.perf_counter()
+    model.learn(steps, reset_num_timesteps=False)
+    seconds = time.perf_counter() - start
+    trained = model.num_timesteps - rollout
+    venv.close()
+    return {"steps": trained, "seconds": seconds, "setup_seconds": setup,
+            "rate": trained / seconds}
+
+
+def run(quick: bool = False) -> dict[str, Any]:
+    """Both ratios and the floor (needs the ``jax`` and ``rl`` extras); ``{"skipped":
+    reason}`` without them."""
+    try:
+        import gymnax  # noqa: F401
+        import jax  # noqa: F401
+        import rejax  # noqa: F401
+        import stable_baselines3  # noqa: F401
+    except ImportError as err:
+        return {"skipped": f"needs the jax and rl extras ({err.name} is missing)"}
+    warnings.filterwarnings("ignore", module="rejax")
+    ppo_steps = 16_384 if quick else 65_536
+    sb3 = sb3_ppo_rate(ppo_steps)
+    jax_ppo = jax_ppo_rate(ppo_steps)
+    jax_free = jax_ppo_rate(ppo_steps, free=True)
+    batches = NUMPY_BATCHES[:1] if quick else NUMPY_BATCHES
+    steps, reps = (20, 2) if quick else (100, 3)
+    numpy_rates = {b: numpy_stepping_rate(b, max(5, steps * 256 // b), reps) for b in batches}
+    best_batch = max(numpy_rates, key=lambda b: numpy_rates[b])
+    n_envs = 256 if quick else JAX_ENVS
+    stepping, compile_s = jax_stepping_rate(n_envs, steps, reps)
+    floor, _ = jax_stepping_rate(n_envs, steps, reps, mode="step_with_noise")
+    return {"ppo": {"sb3_steps_per_s": sb3["rate"], "jax_steps_per_s": jax_ppo["rate"],
+                    "jax_compile_seconds": jax_ppo["compile_seconds"],
+                    "jax_free_steps_per_s": jax_free["rate"],
+                    "ratio": jax_ppo["rate"] / sb3["rate"],
+                    "ceiling": jax_free["rate"] / sb3["rate"], "steps": ppo_steps},
+            "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
+                         "jax_envs": n_envs, "jax_steps_per_s": stepping,
+                         "jax_compile_seconds": compile_s, "jax_given_noise_steps_per_s": floor,
+                         "ratio": stepping / numpy_rates[best_batch],
+                         "ceiling": floor / numpy_rates[best_batch]}}
+
+
+def print_results(res: dict[str, Any]) -> None:
+    from ..tables import format_table
+
+    print("\n   the JAX backend (fir_gym.jax) on Orbit-v0 with its EKF\n")
+    if "skipped" in res:
+        print(f"   skipped: {res['skipped']}")
+        return
+    p, s = res["ppo"], res["stepping"]
+    print(format_table(
+        ["what", "numpy steps/s", "JAX steps/s", "ratio", "target", "floor"],
+        [["PPO, shipped recipe, 16 envs", p["sb3_steps_per_s"], p["jax_steps_per_s"],
+          p["ratio"], "≥ 6", f"PPO alone (a free env): {p['jax_free_steps_per_s']:.4g} "
+          f"steps/s (ceiling {p['ceiling']:.3g}); compile {p['jax_compile_seconds']:.1f} s, "
+          "not counted"],
+         [f"stepping, JAX {s['jax_envs']} envs / numpy best ({s['numpy_best_batch']} envs)",
+          s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_steps_per_s"], s["ratio"],
+          "≥ 2", f"noise given, no auto-reset: {s['jax_given_noise_steps_per_s']:.4g} "
+          f"steps/s (ceiling {s['ceiling']:.3g})"]], floatfmt=".4g"))
+
+
+def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:
+    """``(what, measured, limit, ceiling)`` of the two JAX targets (lower bounds)."""
+    if not res or "skipped" in res:
+        return []
+    p, s = res["ppo"], res["stepping"]
+    return [("JAX PPO / SB3 PPO env-steps per second (Orbit-v0 + EKF, 16 envs)",
+             p["ratio"], 6.0, p["ceiling"]),
+            (f"JAX Orbit-v0 + EKF step at {s['jax_envs']} envs / best numpy vector env",
+             s["ratio"], 2.0, s["ceiling"])]
