@@ -224,7 +224,8 @@ class CarrierMotionEnv(PlantEnv):
         return x_next, {"compensator_offset": a[..., 0] * self.c_max}
 
     def _noise_free_measurement(self, x: FloatArray, extra: dict[str, Any] | None) -> FloatArray:
-        return x @ self._C.T
+        with np.errstate(over="ignore", invalid="ignore"):   # a non-finite reading is a
+            return x @ self._C.T                             # simulation failure, reported
 
     def _reward(self, x: FloatArray, a: FloatArray, x_next: FloatArray) -> Any:
         if x_next.ndim == 1:   # in Python floats: a huge finite state overflows to inf quietly

@@ -15,7 +15,11 @@ flag when it is built and when it traces, and raises if it was turned off later.
 
 Environments: :func:`make` (``fir_gym.jax.make(env_id, kind, **kwargs)`` → ``(env, params)``,
 as ``gymnax.make``) over :data:`PLANTS` (:mod:`fir_gym.jax.registry`):
-:class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000, simulation 1).
+:class:`fir_gym.jax.orbit.Orbit` (``fir_gym/Orbit-v0``, paper 000, simulation 1),
+:class:`fir_gym.jax.uncertain_oscillator.UncertainOscillator` (``fir_gym/UncertainOscillator-v0``,
+paper 000, simulation 2), :class:`fir_gym.jax.carrier_motion.CarrierMotion`
+(``fir_gym/CarrierMotion-v0``, paper 001), :class:`fir_gym.jax.van_der_pol.VanDerPol`
+(``fir_gym/VanDerPol-v0``, paper 002). Each module's docstring states its noise contract.
 """
 
 from __future__ import annotations
@@ -42,6 +46,12 @@ except ImportError as error:
 jax.config.update("jax_enable_x64", True)
 
 from ._x64 import require_x64  # noqa: E402  (after the x64 switch)
+from .carrier_motion import (  # noqa: E402
+    CarrierMotion,
+    CarrierMotionParams,
+    CarrierMotionState,
+    carrier_motion_params,
+)
 from .orbit import (  # noqa: E402
     Orbit,
     OrbitNoise,
@@ -53,6 +63,36 @@ from .orbit import (  # noqa: E402
     orbit_reset_noise,
 )
 from .registry import PLANTS, make  # noqa: E402
+from .uncertain_oscillator import (  # noqa: E402
+    UncertainOscillator,
+    UncertainOscillatorParams,
+    UncertainOscillatorState,
+    uncertain_oscillator_params,
+)
+from .van_der_pol import VanDerPol, VanDerPolParams, VanDerPolState, van_der_pol_params  # noqa: E402
 
-__all__ = ["PLANTS", "Orbit", "OrbitNoise", "OrbitParams", "OrbitResetNoise", "OrbitState",
-           "make", "orbit_noise", "orbit_params", "orbit_reset_noise", "require_x64"]
+__all__ = [
+    "PLANTS",
+    "CarrierMotion",
+    "CarrierMotionParams",
+    "CarrierMotionState",
+    "Orbit",
+    "OrbitNoise",
+    "OrbitParams",
+    "OrbitResetNoise",
+    "OrbitState",
+    "UncertainOscillator",
+    "UncertainOscillatorParams",
+    "UncertainOscillatorState",
+    "VanDerPol",
+    "VanDerPolParams",
+    "VanDerPolState",
+    "carrier_motion_params",
+    "make",
+    "orbit_noise",
+    "orbit_params",
+    "orbit_reset_noise",
+    "require_x64",
+    "uncertain_oscillator_params",
+    "van_der_pol_params",
+]

@@ -25,9 +25,17 @@ class JaxPlant:
 
 
 def _plants() -> dict[str, JaxPlant]:
-    from . import orbit
+    from . import carrier_motion, orbit, uncertain_oscillator, van_der_pol
 
-    plants = [JaxPlant("fir_gym/Orbit-v0", orbit.Orbit, orbit.orbit_params, orbit.KINDS)]
+    plants = [
+        JaxPlant("fir_gym/Orbit-v0", orbit.Orbit, orbit.orbit_params, orbit.KINDS),
+        JaxPlant("fir_gym/UncertainOscillator-v0", uncertain_oscillator.UncertainOscillator,
+                 uncertain_oscillator.uncertain_oscillator_params, uncertain_oscillator.KINDS),
+        JaxPlant("fir_gym/CarrierMotion-v0", carrier_motion.CarrierMotion,
+                 carrier_motion.carrier_motion_params, carrier_motion.KINDS),
+        JaxPlant("fir_gym/VanDerPol-v0", van_der_pol.VanDerPol, van_der_pol.van_der_pol_params,
+                 van_der_pol.KINDS),
+    ]
     return {p.env_id: p for p in plants}
 
 

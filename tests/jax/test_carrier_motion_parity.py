@@ -165,9 +165,6 @@ CASES: dict[str, dict[str, Any]] = {
 FAILING = {"overflow": (11, 2), "sensor_overflow": (15, 3)}
 
 
-# the numpy plant's measurement of the sensor_overflow case overflows in its matmul (a
-# RuntimeWarning, which pyproject's filter makes an error inside fir_gym)
-@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 @pytest.mark.parametrize("case", sorted(CASES))
 @pytest.mark.parametrize("kind", ["true", "measurement", "kf"])
 def test_an_episode_matches_the_numpy_env(kind: str, case: str) -> None:
