@@ -33,12 +33,12 @@ agreement with the MuJoCo plant (tests/jax/test_pendulum_slider_parity.py, same 
 noise): at the benchmark settings (``frame_skip=10``, 500 steps) the two trajectories
 differ by at most 1.6e-15 of each component's range over an episode (max |Δθ̇| = 8.2e-15
 rad/s on a range of ~6 rad/s, max |Δx| = 8.3e-17 m) for free, resonant, random-hold and
-bang-bang forcing and with process noise — 300 times inside the worst-case round-off bound
-propagated along the trajectory, i.e. round-off: the same RK4 of the same ODE, the
-operations in another order. MuJoCo's warnings (``mjWARN_BADQPOS`` and friends, which reset
-its data) have no counterpart here: a
-non-finite new state is ``"nonfinite_state"``, one beyond ``±state_limit`` (MuJoCo's
-``mjMAXVAL`` = 1e10, :attr:`PendulumSliderEnv.state_limit`) ``"state_overflow"``.
+bang-bang forcing and with process noise — at every step at least 47 times inside the
+worst-case round-off bound propagated along the trajectory, i.e. round-off: the same RK4
+of the same ODE, the operations in another order. MuJoCo's warnings (``mjWARN_BADQPOS``
+and friends, which reset its data) have no counterpart here: a non-finite new state is
+``"nonfinite_state"``, one beyond ``±state_limit`` (MuJoCo's ``mjMAXVAL`` = 1e10,
+:attr:`PendulumSliderEnv.state_limit`) ``"state_overflow"``.
 
 **Step** (:meth:`fir_gym.envs._base.PlantEnv.step`): ``x' = RK4(x, U) + w``, ``w ~ N(0,
 Q)`` (Q = 0 by default: MuJoCo is deterministic); ``y = x' + v``, ``v ~ N(0, R)``, ``R =
@@ -65,8 +65,8 @@ is paper 003's ``1e-6 I``). Prior: the plant's initial-state mean and covariance
 (:func:`fir_gym.wrappers.estimator_observation.prior_of`). ``reset`` consumes ``y[0]``
 (update only); each step predicts with the applied action — ``x⁻ = f(x̂, u)``, ``P⁻ = F P
 Fᵀ + Q`` with ``F`` the exact Jacobian of the RK4 map (stage-wise sensitivities,
-:func:`slider_interval`) — then makes the Joseph-form update with ``h(x) = x``, ``H = I``
-(:mod:`fir_gym.jax.kalman`: :func:`~fir_gym.jax.kalman.ekf_predict`,
+:func:`slider_interval_and_jacobian`) — then makes the Joseph-form update with ``h(x) =
+x``, ``H = I`` (:mod:`fir_gym.jax.kalman`: :func:`~fir_gym.jax.kalman.ekf_predict`,
 :func:`~fir_gym.jax.kalman.kf_update_innovation`, :func:`~fir_gym.jax.kalman.watch`).
 The watch is the numpy one with its defaults: χ² quantile of ``nis_tail = 1e-9`` for 4
 channels, ``nis_patience = 10``, ``max_covariance_trace = 1e12``.
@@ -401,15 +401,28 @@ def _friction_sign(xd: jax.Array, friction: str) -> tuple[Any, Any]:
     return t, (1.0 - t * t) / COULOMB_VELOCITY
 
 
-def slider_derivatives(z: jax.Array, U: jax.Array, p: Physics, friction: str,
-                       jacobian: bool = False) -> tuple[jax.Array, jax.Array | None]:
+def slider_derivatives(z: jax.Array, U: jax.Array, p: Physics, friction: str
+                       ) -> jax.Array:
+    """``ż = a(z, U)``: :func:`slider_derivatives_and_jacobian` without the Jacobian."""
+    return _derivatives(z, U, p, friction, jacobian=False)[0]
+
+
+def slider_derivatives_and_jacobian(z: jax.Array, U: jax.Array, p: Physics, friction: str
+                                    ) -> tuple[jax.Array, jax.Array]:
     """``ż = a(z, U)`` of paper 003's pendulum slider (the Lagrangian's eq (15) with its
-    errata, docs/papers.md#003-eq-15) and, with ``jacobian``, the rows ``∂ẍ/∂z`` and
-    ``∂θ̈/∂z`` (2, 4) — :func:`fir_gym.envs._interval_kernels._slider_derivatives` for the
+    errata, docs/papers.md#003-eq-15) and the rows ``∂ẍ/∂z`` and ``∂θ̈/∂z`` (2, 4) of its
+    Jacobian — :func:`fir_gym.envs._interval_kernels._slider_derivatives` for the
     physical equations, the same formulas in the same order:
     ``M [ẍ, θ̈]ᵀ = b`` with ``M = [[m1+m2, −m2 l cosθ + s μ m2 l sinθ], [−m2 l cosθ, I_c +
     m2 l²]]``, ``b = [U − 2k (x − l0) − m2 l sinθ θ̇² − s μ ((m1+m2) g + m2 l cosθ θ̇²),
     −M0 θ̇ − m2 g l sinθ]``; ``∂q̈/∂z = M⁻¹ (∂b/∂z − (∂M/∂z) q̈)``."""
+    a, rows = _derivatives(z, U, p, friction, jacobian=True)
+    assert rows is not None                                  # jacobian=True: the rows
+    return a, rows
+
+
+def _derivatives(z: jax.Array, U: jax.Array, p: Physics, friction: str, jacobian: bool
+                 ) -> tuple[jax.Array, jax.Array | None]:
     m1, m2, l, g, k = p.m1, p.m2, p.l, p.g, p.k
     xd, th, w = z[1], z[2], z[3]
     c, sn = jnp.cos(th), jnp.sin(th)
@@ -447,7 +460,7 @@ def _rk4_step(z: jax.Array, U: jax.Array, p: Physics, friction: str, h: float) -
     stages: list[jax.Array] = []
     for coef in _RK4_COEFS:
         zi = z if coef == 0.0 else z + (coef * h) * stages[-1]
-        stages.append(slider_derivatives(zi, U, p, friction)[0])
+        stages.append(slider_derivatives(zi, U, p, friction))
     return z + (h / 6.0) * (stages[0] + 2.0 * stages[1] + 2.0 * stages[2] + stages[3])
 
 
@@ -460,7 +473,7 @@ def _rk4_step_jacobian(z: jax.Array, Fz: jax.Array, U: jax.Array, p: Physics, fr
     sens: list[jax.Array] = []
     for coef in _RK4_COEFS:
         zi = z if coef == 0.0 else z + (coef * h) * stages[-1]
-        a, A = slider_derivatives(zi, U, p, friction, jacobian=True)
+        a, A = slider_derivatives_and_jacobian(zi, U, p, friction)
         stages.append(a)
         dz = Fz if coef == 0.0 else Fz + (coef * h) * sens[-1]
         rows = [A[r, 0] * dz[0] + A[r, 1] * dz[1] + A[r, 2] * dz[2] + A[r, 3] * dz[3]
@@ -476,17 +489,21 @@ def _step_length(frame_skip: int) -> float:
     return (TIMESTEP * frame_skip) / frame_skip
 
 
-def slider_interval(z: jax.Array, U: jax.Array, p: Physics, friction: str, frame_skip: int,
-                    jacobian: bool = False) -> tuple[jax.Array, jax.Array | None]:
+def slider_interval(z: jax.Array, U: jax.Array, p: Physics, friction: str, frame_skip: int
+                    ) -> jax.Array:
     """One env step of the ODE: ``frame_skip`` RK4 steps of ``h = 1 ms`` from ``z`` under the
-    held force ``U`` (newtons), and with ``jacobian`` the exact Jacobian of that map —
-    :meth:`fir_gym.envs.pendulum_slider_dynamics.PendulumSliderDynamics.propagate`
-    (``f_jac_f``), the numpy model's (and native vector env's) interval map."""
+    held force ``U`` (newtons) — :meth:`fir_gym.envs.pendulum_slider_dynamics.
+    PendulumSliderDynamics.propagate`, the numpy model's (and native vector env's) interval
+    map."""
     h = _step_length(frame_skip)
-    if not jacobian:
-        z_new = jax.lax.fori_loop(0, frame_skip,
-                                  lambda _, z: _rk4_step(z, U, p, friction, h), z)
-        return z_new, None
+    return jax.lax.fori_loop(0, frame_skip, lambda _, z: _rk4_step(z, U, p, friction, h), z)
+
+
+def slider_interval_and_jacobian(z: jax.Array, U: jax.Array, p: Physics, friction: str,
+                                 frame_skip: int) -> tuple[jax.Array, jax.Array]:
+    """:func:`slider_interval` and the exact Jacobian ``∂z⁺/∂z`` of that map (stage-wise
+    sensitivities, as ``PendulumSliderDynamics.propagate(..., jacobian=True)``)."""
+    h = _step_length(frame_skip)
 
     def body(_: Any, carry: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
         return _rk4_step_jacobian(*carry, U, p, friction, h)
@@ -498,7 +515,8 @@ def slider_plant_and_model_intervals(x: jax.Array, U: jax.Array, p: Physics, fri
                                      xf: jax.Array, Uf: jax.Array, pf: Physics,
                                      friction_f: str, frame_skip: int
                                      ) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """:func:`slider_interval` of the plant and, with its Jacobian, of the filter's model
+    """:func:`slider_interval` of the plant and :func:`slider_interval_and_jacobian` of the
+    filter's model
     (from its estimate ``xf``, with its force ``Uf`` and constants ``pf``) in one loop, when
     both take ``frame_skip`` steps: the same numbers as the two loops. Returns ``(x_next,
     xf_next, F)``."""
@@ -595,10 +613,8 @@ def ekf_model(params: PendulumSliderParams
     pf = _physics(params, nominal=True)
 
     def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
-        x_new, F = slider_interval(x, u[0] * params.nominal_force_max, pf,
-                                   params.nominal_friction, params.nominal_frame_skip,
-                                   jacobian=True)
-        return x_new, F  # type: ignore[return-value]  (jacobian=True: F is an array)
+        return slider_interval_and_jacobian(x, u[0] * params.nominal_force_max, pf,
+                                            params.nominal_friction, params.nominal_frame_skip)
     return f_and_F
 
 
@@ -701,7 +717,7 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
                 _physics(params, nominal=True), params.nominal_friction, params.frame_skip)
             prediction = (xp, F)
         else:
-            x_det = slider_interval(state.x, U, p, params.friction, params.frame_skip)[0]
+            x_det = slider_interval(state.x, U, p, params.friction, params.frame_skip)
         return self._finish_step(state, u_in, u, x_det + noise.process, noise.measurement,
                                  prediction, params)
 
@@ -746,12 +762,12 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
         if self.kind == "ekf":
             if prediction is None:
-                xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, params.nominal_Q,
-                                     ekf_model(params))
-            else:
+                belief = ekf_step(_belief(state), y, u, params)
+            else:                 # the model's interval came from the fused loop
                 xp, F = prediction
                 Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
-            new = _with_belief(new, ekf_correct(_belief(state), xp, Pp, y, params))
+                belief = ekf_correct(_belief(state), xp, Pp, y, params)
+            new = _with_belief(new, belief)
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info

@@ -277,8 +277,8 @@ def step_jacobians(states: np.ndarray, actions: np.ndarray, params: Any) -> np.n
     p = jps._physics(params, nominal=False)
 
     def one(x: Any, a: Any) -> Any:
-        return jps.slider_interval(x, a[0] * params.force_max, p, params.friction,
-                                   params.frame_skip, jacobian=True)[1]
+        return jps.slider_interval_and_jacobian(x, a[0] * params.force_max, p, params.friction,
+                                                params.frame_skip)[1]
 
     return np.asarray(jax.jit(jax.vmap(one))(jnp.asarray(states), jnp.asarray(actions)))
 
@@ -337,7 +337,8 @@ def test_the_jax_plant_agrees_with_the_mujoco_plant(run: str) -> None:
     bound = roundoff_bound(ref["state"], ref["action"], params)
     print(f"plant/{run}: max |Δ| per state {np.array2string(diff.max(0), precision=2)}, "
           f"max |Δ|/range {np.max(diff / scale):.2e}, bound/range at the end "
-          f"{np.max(bound[-1] / scale):.2e}, reward max relative error "
+          f"{np.max(bound[-1] / scale):.2e}, smallest bound/|Δ| "
+          f"{np.min(bound[diff > 0] / diff[diff > 0]):.1f}, reward max relative error "
           f"{relative_error(got['reward'], ref['reward']):.2e}")
     assert np.all(diff <= bound), np.argwhere(diff > bound)[:5]
     np.testing.assert_array_equal(got["terminated"], ref["terminated"])
@@ -422,6 +423,49 @@ def test_jit_and_vmap_over_eight_envs() -> None:
     np.testing.assert_allclose(np.asarray(one[0][0]), np.asarray(obs[3]), rtol=1e-12,
                                atol=1e-15)
     assert not np.array_equal(np.asarray(obs[0]), np.asarray(obs[1]))
+
+
+def test_vmap_over_drawn_parameters_matches_the_numpy_env_row_by_row() -> None:
+    """A batch of true friction μ and hinge damping M0 (what paper 003 identifies) drawn
+    around the model's, the parameter pytrees of the rows stacked and vmapped; each row is
+    the numpy env built with its draw, on the same noise: its MuJoCo plant within the
+    round-off bound, its EKF to 1e-9."""
+    draws = np.random.default_rng(7).uniform(0.6, 1.4, (4, 2)) * 0.2
+    rows = [{**NOISY, "mu": float(mu), "M0": float(M0), "nominal": {"mu": 0.2, "M0": 0.2}}
+            for mu, M0 in draws]
+    actions = swing_actions(200, 41)
+    refs = [run_numpy("ekf", actions, np.random.default_rng(200 + i), **BENCH, **row)
+            for i, row in enumerate(rows)]
+    assert all(len(ref["reward"]) == 200 for ref in refs)
+    row_params = [jax_params(**row) for row in rows]
+    params = jax.tree.map(lambda *leaves: jnp.stack([jnp.asarray(v) for v in leaves]),
+                          *row_params)
+    env = jps.PendulumSlider("ekf")
+
+    def one(params: Any, x0: Any, y0: Any, process: Any, measurement: Any) -> Any:
+        _, state = env.reset_with_noise(jps.PendulumSliderResetNoise(x0, y0), params)
+
+        def body(state: Any, step: Any) -> Any:
+            a, w, v = step
+            _, state, _, _, _ = env.step_with_noise(state, a, jps.PendulumSliderNoise(w, v),
+                                                    params)
+            return state, (state.x, state.filter_x, state.filter_P)
+
+        return jax.lax.scan(body, state, (jnp.asarray(actions), process, measurement))[1]
+
+    def stack(key: str) -> Any:
+        return jnp.asarray(np.stack([ref[key] for ref in refs]))
+
+    x0, y0 = (jnp.asarray(np.stack([ref["reset_noise"][i] for ref in refs])) for i in (0, 1))
+    x, fx, fP = map(np.asarray, jax.jit(jax.vmap(one))(params, x0, y0, stack("process"),
+                                                          stack("measurement")))
+    for i, ref in enumerate(refs):
+        bound = roundoff_bound(ref["state"], ref["action"], row_params[i])
+        assert np.all(np.abs(x[i] - ref["state"][1:]) <= bound[1:])
+        assert relative_error(fx[i], ref["obs"][1:]) <= RTOL
+        assert relative_error(fP[i], ref["P"][1:]) <= RTOL
+    # the draws matter: the rows' trajectories differ
+    assert not np.allclose(x[0], x[1])
 
 
 def test_the_drawn_noise_follows_the_documented_splits() -> None:
