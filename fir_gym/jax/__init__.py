@@ -19,7 +19,9 @@ as ``gymnax.make``) over :data:`PLANTS` (:mod:`fir_gym.jax.registry`):
 :class:`fir_gym.jax.uncertain_oscillator.UncertainOscillator` (``fir_gym/UncertainOscillator-v0``,
 paper 000, simulation 2), :class:`fir_gym.jax.carrier_motion.CarrierMotion`
 (``fir_gym/CarrierMotion-v0``, paper 001), :class:`fir_gym.jax.van_der_pol.VanDerPol`
-(``fir_gym/VanDerPol-v0``, paper 002). Each module's docstring states its noise contract.
+(``fir_gym/VanDerPol-v0``, paper 002) and :class:`fir_gym.jax.pendulum_slider.PendulumSlider`
+(``fir_gym/PendulumSlider-v0``: the slider's analytic equations of motion, integrated as
+the numpy plant's MuJoCo scene is, RK4 at 1 ms). Each module's docstring states its noise contract.
 """
 
 from __future__ import annotations
@@ -62,6 +64,12 @@ from .orbit import (  # noqa: E402
     orbit_params,
     orbit_reset_noise,
 )
+from .pendulum_slider import (  # noqa: E402
+    PendulumSlider,
+    PendulumSliderParams,
+    PendulumSliderState,
+    pendulum_slider_params,
+)
 from .registry import PLANTS, make  # noqa: E402
 from .uncertain_oscillator import (  # noqa: E402
     UncertainOscillator,
@@ -81,6 +89,9 @@ __all__ = [
     "OrbitParams",
     "OrbitResetNoise",
     "OrbitState",
+    "PendulumSlider",
+    "PendulumSliderParams",
+    "PendulumSliderState",
     "UncertainOscillator",
     "UncertainOscillatorParams",
     "UncertainOscillatorState",
@@ -92,6 +103,7 @@ __all__ = [
     "orbit_noise",
     "orbit_params",
     "orbit_reset_noise",
+    "pendulum_slider_params",
     "require_x64",
     "uncertain_oscillator_params",
     "van_der_pol_params",

@@ -25,7 +25,7 @@ class JaxPlant:
 
 
 def _plants() -> dict[str, JaxPlant]:
-    from . import carrier_motion, orbit, uncertain_oscillator, van_der_pol
+    from . import carrier_motion, orbit, pendulum_slider, uncertain_oscillator, van_der_pol
 
     plants = [
         JaxPlant("fir_gym/Orbit-v0", orbit.Orbit, orbit.orbit_params, orbit.KINDS),
@@ -35,6 +35,8 @@ def _plants() -> dict[str, JaxPlant]:
                  carrier_motion.carrier_motion_params, carrier_motion.KINDS),
         JaxPlant("fir_gym/VanDerPol-v0", van_der_pol.VanDerPol, van_der_pol.van_der_pol_params,
                  van_der_pol.KINDS),
+        JaxPlant("fir_gym/PendulumSlider-v0", pendulum_slider.PendulumSlider,
+                 pendulum_slider.pendulum_slider_params, pendulum_slider.KINDS),
     ]
     return {p.env_id: p for p in plants}
 
