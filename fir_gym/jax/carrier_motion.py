@@ -106,6 +106,8 @@ import numpy as np
 from flax import struct
 from gymnax.environments import spaces
 
+from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
+from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
 from ._x64 import require_x64
 from .kalman import Belief, WatchLimits, kf_predict, kf_update, watch, watch_limits
 
@@ -113,20 +115,10 @@ from .kalman import Belief, WatchLimits, kf_predict, kf_update, watch, watch_lim
 PAPER_A21 = -0.36
 PAPER_A22 = -0.06
 PAPER_NOISE_INPUT = (0.6, -0.036)
-#: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`)
-STATE_LIMIT = 1e150
 #: the numpy plant's worst per-step cost (``CarrierMotionEnv.cost_cap``)
 COST_CAP = 100.0
 #: the observation kinds (the estimator kind last)
 KINDS = ("true", "measurement", "kf")
-#: what the ``"kf"`` kind observes (``OBSERVATION_KINDS`` of
-#: :mod:`fir_gym.wrappers.estimator_observation`)
-OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
-#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
-SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
-                       "nonfinite_reward")
-#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
-PRIOR_FLOOR = 1e-9
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 MODEL_PARAMETERS = ("sample_period", "q", "v", "delta22", "delta_c", "a21", "a22",
                     "noise_input")

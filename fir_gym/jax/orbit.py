@@ -77,28 +77,21 @@ import numpy as np
 from flax import struct
 from gymnax.environments import spaces
 
+from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
+from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
-from .kalman import Belief, WatchLimits, watch
+from .kalman import Belief, WatchLimits, symmetrize, watch
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)
 TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
-#: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`)
-STATE_LIMIT = 1e150
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
-#: what the ``"ekf"`` kind observes (``OBSERVATION_KINDS`` of
-#: :mod:`fir_gym.wrappers.estimator_observation`)
-OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
-#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
-SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
-                       "nonfinite_reward")
 #: the Euler loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``):
 #: 1.25x the env-steps/s of no unrolling on a CPU at 2048 envs; 25 compiles slowly and runs
 #: slower (scripts/jax_stepping_speed.py)
 UNROLL = 10
-#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
-PRIOR_FLOOR = 1e-9
 
 
 @struct.dataclass
@@ -286,12 +279,6 @@ def orbit_plant_and_model_intervals(x: jax.Array, a: jax.Array, mu: jax.Array,
     return jnp.stack([r, v]), jnp.stack([rf, vf]), jnp.array([[j11, j12], [j21, j22]])
 
 
-def _psd_sqrt(M: jax.Array) -> jax.Array:
-    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`."""
-    w, V = jnp.linalg.eigh(M)
-    return V * jnp.sqrt(jnp.clip(w, 0.0, None))
-
-
 def orbit_reset_noise(key: jax.Array, params: OrbitParams) -> OrbitResetNoise:
     """The noise of a reset from one draw ``z = jax.random.normal(key, (3,))``:
     ``initial = sqrt(initial_state_cov) z[:2]``, ``measurement = sqrt(R) z[2:]``."""
@@ -309,10 +296,6 @@ def orbit_noise(key: jax.Array, params: OrbitParams) -> OrbitNoise:
     return OrbitNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z[:2], jnp.sqrt(params.R) * z[2:])
 
 
-def _symmetrize(P: jax.Array) -> jax.Array:
-    return 0.5 * (P + P.T)
-
-
 def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array
                ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """The Joseph-form update of the prior ``(x, P)`` with ``y`` (1,), ``H = [1, 0]``:
@@ -322,7 +305,7 @@ def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array
     W = jnp.where(S > 0.0, 1.0 / S, jnp.nan)
     K = P[:, 0] * W
     A = jnp.eye(2) - jnp.outer(K, jnp.array([1.0, 0.0]))
-    P_new = _symmetrize(A @ P @ A.T + R * jnp.outer(K, K))
+    P_new = symmetrize(A @ P @ A.T + R * jnp.outer(K, K))
     return x + K * e, P_new, e * W * e
 
 
@@ -462,7 +445,7 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
             if not fused:
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,
                                        params.nominal_euler_dt, params.nominal_substeps)
-            Pp = _symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
+            Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
             new = ekf_watch(new, *ekf_update(xp, Pp, y, params.nominal_R), params)
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)

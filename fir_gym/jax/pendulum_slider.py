@@ -109,6 +109,9 @@ import numpy as np
 from flax import struct
 from gymnax.environments import spaces
 
+from ._plant import OBSERVATIONS, PRIOR_FLOOR
+from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import (
     Belief,
@@ -138,14 +141,6 @@ COULOMB_VELOCITY = 0.01
 BRACKET_CAP = 20.0
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
-#: what the ``"ekf"`` kind observes (``OBSERVATION_KINDS`` of
-#: :mod:`fir_gym.wrappers.estimator_observation`)
-OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
-#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
-SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
-                       "nonfinite_reward")
-#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
-PRIOR_FLOOR = 1e-9
 #: the physical parameters, in the order of :class:`Physics`
 PHYSICAL = ("m1", "m2", "l", "I_c", "k", "l0", "M0", "mu", "g")
 _TRIU = np.triu_indices(4)
@@ -549,12 +544,6 @@ def pendulum_slider_in_domain(x: jax.Array, params: PendulumSliderParams) -> jax
     """The slider on the rail, ``|x − l0| ≤ 0.3``, and the state finite
     (:meth:`PendulumSliderEnv._in_domain`)."""
     return jnp.all(jnp.isfinite(x)) & (jnp.abs(x[0] - params.l0) <= 0.3)
-
-
-def _psd_sqrt(M: jax.Array) -> jax.Array:
-    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`."""
-    w, V = jnp.linalg.eigh(M)
-    return V * jnp.sqrt(jnp.clip(w, 0.0, None))
 
 
 def pendulum_slider_reset_noise(key: jax.Array, params: PendulumSliderParams

@@ -100,6 +100,9 @@ import numpy as np
 from flax import struct
 from gymnax.environments import spaces
 
+from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
+from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
 
@@ -107,20 +110,10 @@ from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watc
 UNCERTAINTY_READINGS = ("state", "rate")
 #: the paper's δ schedule: δ = 0.15 for 350 <= k <= 400
 PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
-#: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`)
-STATE_LIMIT = 1e150
 #: the worst per-step cost (``UncertainOscillatorEnv.cost_cap``)
 COST_CAP = 2.25
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
-#: what the ``"ekf"`` kind observes (``OBSERVATION_KINDS`` of
-#: :mod:`fir_gym.wrappers.estimator_observation`)
-OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
-#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
-SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
-                       "nonfinite_reward")
-#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
-PRIOR_FLOOR = 1e-9
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 PARAMETERS = ("Q", "R", "dt", "stiffness", "damping_gain", "drive", "u_max")
 #: ``H`` of ``y = x1 + v``
@@ -336,12 +329,6 @@ def oscillator_jacobian(x: jax.Array, c: Any, d: Any, dt: Any, uncertainty: str,
     if uncertainty == "state":
         return jnp.diag(scale) + dt * dr
     return jnp.eye(3) + dt * scale[:, None] * dr
-
-
-def _psd_sqrt(M: jax.Array) -> jax.Array:
-    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`."""
-    w, V = jnp.linalg.eigh(M)
-    return V * jnp.sqrt(jnp.clip(w, 0.0, None))
 
 
 def uncertain_oscillator_reset_noise(key: jax.Array, params: UncertainOscillatorParams

@@ -103,24 +103,17 @@ import numpy as np
 from flax import struct
 from gymnax.environments import spaces
 
+from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
+from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
 
-#: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`)
-STATE_LIMIT = 1e150
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
-#: what the ``"ekf"`` kind observes (``OBSERVATION_KINDS`` of
-#: :mod:`fir_gym.wrappers.estimator_observation`)
-OBSERVATIONS = ("estimate", "estimate+covariance", "estimate+measurement")
-#: ``info["simulation_failure"]`` codes (0: none), the numpy plant's names in this order
-SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observation",
-                       "nonfinite_reward")
 #: the Heun loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``; the
 #: value :mod:`fir_gym.jax.orbit` measured for its Euler loops)
 UNROLL = 10
-#: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
-PRIOR_FLOOR = 1e-9
 #: the numpy env's parameters that ``nominal=`` may change (its ``params``)
 NOMINAL_KEYS = ("Q", "R", "epsilon", "h", "substeps", "u_max")
 #: the Heun accuracy limit the numpy constructor checks: ``|ε| state_bound² τ <= 0.5``
@@ -416,12 +409,6 @@ def heun_plant_and_model_intervals(x: jax.Array, force: jax.Array, dW: jax.Array
         unroll=_unroll(substeps))
     return (jnp.stack([x1, x2]), (x1_sum - 0.5 * x1) / substeps, jnp.stack([f1, f2]),
             jnp.array([[p11, p12], [p21, p22]]))
-
-
-def _psd_sqrt(M: jax.Array) -> jax.Array:
-    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`."""
-    w, V = jnp.linalg.eigh(M)
-    return V * jnp.sqrt(jnp.clip(w, 0.0, None))
 
 
 def _measurement_sqrt(params: VanDerPolParams) -> jax.Array:

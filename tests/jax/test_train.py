@@ -152,7 +152,7 @@ def test_the_recipe_refuses_what_it_cannot_translate(kwargs: dict, match: str) -
 
 # ---------------------------------------------------------------------------- the CLI
 @pytest.mark.parametrize("argv", [
-    ["--env", "fir_gym/VanDerPol-v0"],
+    ["--env", "fir_gym/VanDerPol-v0", "--kind", "ukf"],
     ["--env", ORBIT, "--kind", "efir"],
     ["--env", ORBIT, "--kind", "ekf", "--observation", "estimate+covariance"],
 ])
