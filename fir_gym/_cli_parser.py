@@ -239,8 +239,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of the plants (default: all five)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--compare-with", default=None, metavar="DIR",
-                   help="with --backend jax: an SB3 benchmark's --out folder, whose rows "
-                        "stand beside the JAX rows (default: none)")
+                   help="with --backend jax: an SB3 benchmark's --out folder (or a Markdown "
+                        "file of its tables, e.g. README.md), whose rows stand beside the JAX "
+                        "rows (default: none)")
     _add_runner_options(p, "(plant, kind, seed) jobs",
                         jax="; jax: the learned kinds the JAX backend has (true, measurement, "
                             "the plant's filter), all seeds of a plant and kind in one "

@@ -9,9 +9,10 @@ of :data:`fir_gym.jax.registry.PLANTS` and to the kinds both have (``true``,
 (:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds' mean returns and
 its 95 % interval from the same bootstrap as the SB3 benchmark's
 (:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), the compile and
-training times and the training rate. Given an SB3 benchmark's folder
-(``--compare-with``), each row stands beside the SB3 row of the same plant and kind, with
-the verdict the issue asks for: is the JAX IQM inside the SB3 interval? The two backends'
+training times and the training rate. Given an SB3 benchmark (``--compare-with``: its
+folder, or a Markdown file of its tables such as its ``BENCHMARK.md`` or README.md's
+benchmark section), each row stands beside the SB3 row of the same plant and kind, with the
+verdict the issue asks for: is the JAX IQM inside the SB3 interval? The two backends'
 evaluation episodes are drawn from different generators (the same distribution, not the
 same draws).
 """
@@ -94,15 +95,55 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
     return report
 
 
-def _sb3_tables(folder: str | Path) -> dict[str, dict[str, dict[str, Any]]]:
-    """The SB3 benchmark's rows by plant and kind, from its ``results.json``."""
-    path = Path(folder) / "results.json"
-    if not path.is_file():
-        raise ValueError(f"--compare-with {folder} is not a benchmark-controllers folder "
-                         "(it has no results.json)")
-    data = json.loads(path.read_text())
+def _sb3_tables(source: str | Path) -> dict[str, dict[str, dict[str, Any]]]:
+    """The SB3 benchmark's rows by plant and kind: from a ``benchmark-controllers`` folder's
+    ``results.json``, or from a Markdown file with its tables (the folder's
+    ``BENCHMARK.md``, or README.md's nominal cell of the robustness benchmark; see
+    :func:`markdown_tables`)."""
+    path = Path(source)
+    if path.is_file() and path.suffix == ".md":
+        tables = markdown_tables(path.read_text(encoding="utf-8"))
+        if not tables:
+            raise ValueError(f"--compare-with {source} has no benchmark table (a plant's "
+                             "heading, then rows of kind | seeds | IQM return [95% CI])")
+        return tables
+    if not (path / "results.json").is_file():
+        raise ValueError(f"--compare-with {source} is neither a benchmark-controllers folder "
+                         "(it has no results.json) nor a Markdown file of its tables")
+    data = json.loads((path / "results.json").read_text())
     return {env_id: {r["kind"]: r for r in table}
             for env_id, table in data.get("tables", {}).items()}
+
+
+def markdown_tables(text: str) -> dict[str, dict[str, dict[str, Any]]]:
+    """The rows ``kind | seeds | IQM [low, high] | ...`` of the benchmark tables in ``text``
+    by plant (the plant named by the last ``## fir_gym/...`` or ``*fir_gym/...*`` line
+    above): ``{"iqm", "low", "high", "seeds"}`` per kind. Where the text marks its
+    benchmark section (README.md's ``<!-- benchmark:start -->`` … ``<!-- benchmark:end
+    -->``), only that section is read."""
+    import re
+
+    start, end = "<!-- benchmark:start -->", "<!-- benchmark:end -->"
+    if start in text:
+        text = text.split(start, 1)[1].split(end, 1)[0]
+
+    heading = re.compile(r"^(?:#+\s*|\*)(fir_gym/[\w.-]+)\*?\s*$")
+    row = re.compile(r"^\|\s*([\w+-]+)\s*\|\s*(\d+)\s*\|\s*(-?[\d.e+]+)\s*\[(-?[\d.e+]+),"
+                     r"\s*(-?[\d.e+]+)\]\s*\|")
+    tables: dict[str, dict[str, dict[str, Any]]] = {}
+    plant = None
+    for line in text.splitlines():
+        found = heading.match(line.strip())
+        if found:
+            plant = found.group(1)
+            continue
+        cells = row.match(line.strip())
+        if plant and cells:
+            kind, seeds, centre, low, high = cells.groups()
+            tables.setdefault(plant, {})[kind] = {
+                "iqm": float(centre), "low": float(low), "high": float(high),
+                "seeds": int(seeds)}
+    return tables
 
 
 def summarise(rows: list[dict[str, Any]], sb3: dict[str, dict[str, dict[str, Any]]] | None

@@ -55,3 +55,36 @@ def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="compare-with"):
         benchmark.run_benchmark(tmp_path / "x", compare_with=tmp_path / "nothing",
                                 progress=False)
+
+
+def test_markdown_tables_read_the_benchmark_section_only() -> None:
+    text = """
+*fir_gym/Orbit-v0*
+
+| controller | seeds | IQM return [95% CI] |
+|---|---:|---|
+| true | 3 | -1 [-2, -0.5] |
+
+<!-- benchmark:start -->
+*fir_gym/Orbit-v0*
+
+| controller        | seeds | IQM return [95% CI]     | estimation gap |
+|-------------------|------:|-------------------------|----------------|
+| true              |     3 | -552.1 [-639.6, -464]   | —              |
+| ekf               |     3 | -586.6 [-685.9, -491.1] | 0.06           |
+
+## fir_gym/VanDerPol-v0
+
+| kind | seeds | IQM return [95% CI] |
+|---|---:|---|
+| measurement-stack | 5 | -1.5e+03 [-2e+03, -1e+03] |
+<!-- benchmark:end -->
+| true | 3 | -9 [-9, -9] |
+"""
+    tables = benchmark.markdown_tables(text)
+    assert tables == {
+        "fir_gym/Orbit-v0": {"true": {"iqm": -552.1, "low": -639.6, "high": -464.0, "seeds": 3},
+                             "ekf": {"iqm": -586.6, "low": -685.9, "high": -491.1, "seeds": 3}},
+        "fir_gym/VanDerPol-v0": {"measurement-stack": {"iqm": -1500.0, "low": -2000.0,
+                                                       "high": -1000.0, "seeds": 5}}}
+
