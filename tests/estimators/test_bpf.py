@@ -236,3 +236,22 @@ def test_contract_errors_and_registry():
     with pytest.raises(ValueError, match="riccati must be one of"):
         BlockPulseKalmanFilter(carrier_model(), riccati="local")
     assert estimator_class("bpf-kf") is BlockPulseKalmanFilter
+
+
+def test_a_singular_system_of_a_batch_gets_nan_and_the_others_their_own_result():
+    """The paper-literal global recursion on a batch whose second backward transition is
+    exactly singular (ψ = 0) with one shared ``ξ0``: that system's ``P`` is NaN and its
+    condition infinite (the estimator flags it), the first system's result is what it gets
+    alone — ``M = 0`` leaves ``P`` at ``P0`` (mutation testing found the batched fallback of
+    the singular solve untested)."""
+    from fir_gym.estimators.bpf import bpf_riccati_global_step
+    P0 = np.array([[2.0, 0.3], [0.3, 1.0]])
+    xi0 = np.vstack([np.eye(2), P0])
+    psi = np.stack([np.eye(4), np.zeros((4, 4))])
+    _, step = bpf_riccati_global_step(psi, np.zeros((4, 4)), xi0, 0.1)
+    _, alone = bpf_riccati_global_step(psi[0], np.zeros((4, 4)), xi0, 0.1)
+    for P, P1 in ((step.P_bar, alone.P_bar), (step.P_next, alone.P_next)):
+        np.testing.assert_allclose(P[0], P1, rtol=1e-15)
+        np.testing.assert_allclose(P1, P0, rtol=1e-15)
+        assert np.isnan(P[1]).all()
+    assert np.isfinite(step.condition[0]) and step.condition[1] == np.inf

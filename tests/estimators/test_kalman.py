@@ -327,3 +327,33 @@ def test_registry():
     assert isinstance(make_estimator("kf", model, x0=[1.0, 0.0]), KalmanFilter)
     with pytest.raises(ValueError, match=r"known estimators are .*kf"):
         make_estimator("nope", model)
+
+
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
+def test_a_restart_in_the_steady_state_leaves_it_and_starts_from_the_prior(path):
+    """Once the batch has settled (``P``, ``K`` kept), restarting one system leaves the
+    steady-state regime: that system starts from its prior as a fresh filter does (the
+    textbook recursion, :func:`textbook_kf`), the others keep their estimates, and the batch
+    settles again later (mutation testing found the restart's regime switch untested)."""
+    rng = np.random.default_rng(8)
+    model = random_system(rng, 3, 2, 1)
+    x0, P0 = np.zeros(3), 4.0 * np.eye(3)
+    T, k_r = 700, 600
+    Y, U = rng.normal(size=(T, 2, 2)), rng.normal(size=(T, 2, 1))
+    with on_path(path):
+        kf = KalmanFilter(model, x0=np.zeros((2, 3)), P0=P0)
+        out = []
+        for k in range(T):
+            if k == k_r:
+                assert kf.steady_state                       # the batch had settled
+                kf.restart([1])
+                assert not kf.steady_state
+            out.append(kf.step(Y[k], U[k - 1] if k else None))
+        assert kf.steady_state                               # and settles again
+    out = np.array(out)
+    fresh = textbook_kf(model.A, model.B, model.C, model.Q, model.R, x0, P0, Y[k_r:, 1],
+                        np.concatenate([np.zeros((1, 1)), U[k_r:-1, 1]]))
+    np.testing.assert_allclose(out[k_r:, 1], [x for x, _ in fresh], rtol=1e-9, atol=1e-10)
+    alone = KalmanFilter(model, x0=x0, P0=P0)
+    ref = np.array([alone.step(Y[k, 0], U[k - 1, 0] if k else None) for k in range(T)])
+    np.testing.assert_allclose(out[:, 0], ref, rtol=1e-9, atol=1e-10)

@@ -200,3 +200,21 @@ def test_options_are_keyword_only_for_every_registered_estimator():
         assert params[0].kind in (params[0].POSITIONAL_ONLY, params[0].POSITIONAL_OR_KEYWORD), name
         late = [p.name for p in params[1:] if p.kind not in (p.KEYWORD_ONLY, p.VAR_KEYWORD)]
         assert not late, f"{name}: options not keyword-only: {late}"
+
+
+@pytest.mark.parametrize("points", [MerweScaledSigmaPoints, CubatureSigmaPoints])
+@pytest.mark.parametrize("n", [0, -1, 2.0, True])
+def test_sigma_points_refuse_a_dimension_that_is_not_a_positive_integer(points, n) -> None:
+    with pytest.raises(ValueError, match="n must be a positive integer"):
+        points(n)
+
+
+def test_the_ukf_refuses_a_time_varying_model_naming_the_filter_that_takes_it() -> None:
+    """The UKF propagates sigma points through a time-free ``f``; a time-varying linear model
+    is the Kalman filter's (mutation testing found the refusal untested)."""
+    from fir_gym.estimators import TimeVaryingLinearModel
+    model = TimeVaryingLinearModel(A=lambda k: np.eye(2) * (1.0 + 0.1 * k), C=[[1.0, 0.0]],
+                                   Q=np.eye(2), R=[[1.0]])
+    with pytest.raises(TypeError, match=r"time-free f/h.*use KalmanFilter"):
+        UnscentedKalmanFilter(model)
+    assert isinstance(KalmanFilter(model), KalmanFilter)
