@@ -117,7 +117,10 @@ class UFIRFilter(FIRFilter):
         method: ``"batch"`` (OLS gain) or ``"iterative"`` (Kalman-like recursion).
 
     Start-up, inputs, missing data and rank-deficiency fallbacks are those of
-    :class:`~.fir.FIRFilter` with ``Q = 0, R = I``.
+    :class:`~.fir.FIRFilter` with ``Q = 0, R = I``. The estimate needs no noise statistics;
+    the reported ``P`` is the noise power gain times the measurement variance ``σ² = mean
+    diag R`` of the model at ``k = 0`` (:attr:`noise_scale`; for a time-varying ``R``, the
+    first step's).
     """
 
     name: ClassVar[str] = "ufir"

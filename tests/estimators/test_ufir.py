@@ -112,3 +112,54 @@ def test_the_batch_gain_recovers_the_targets_state_from_noise_free_data(form, ta
     Y = np.concatenate([C @ x[t] for t in range(L)])
     S = ufir_gain(make_window(A, C, np.zeros((3, 3)), np.eye(2), L), form).S
     np.testing.assert_allclose(S @ Y, x[target], rtol=1e-9, atol=1e-10)
+
+
+@pytest.mark.parametrize("form", ["filter", "predictor"])
+def test_iterative_form_equals_batch_form_with_missing_measurements(form: str) -> None:
+    """A window with a missing measurement (``nan_policy="skip"``) leaves the iterative
+    recursion for the masked batch estimate: both methods give the same estimates and
+    covariances through the gaps (mutation testing found the switch untested)."""
+    model = lti(6)
+    a = UFIRFilter(model, horizon=6, form=form, nan_policy="skip")
+    b = UFIRFilter(model, horizon=6, form=form, method="iterative", nan_policy="skip")
+    rng = np.random.default_rng(9)
+    for k in range(30):
+        y = rng.normal(size=2)
+        if k in (9, 10, 17):
+            y[k % 2] = np.nan
+        u = rng.normal(size=1) if k else None
+        ea, eb = a.step(y, u), b.step(y, u)
+        np.testing.assert_allclose(eb, ea, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(b.P, a.P, rtol=1e-9, atol=1e-12)
+
+
+def test_iterative_form_at_the_shortest_horizon() -> None:
+    """At the shortest horizon (the observability index, 3 for a chain of integrators seen
+    at its first state) the window determines the state only with its last sample: the
+    iterative recursion's start-up batch spans the whole window, and the estimate is the
+    batch one and exact on noise-free data."""
+    A = np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.1], [0.0, 0.0, 1.0]])
+    model = LinearModel(A=A, C=[[1.0, 0.0, 0.0]], Q=np.eye(3), R=[[1.0]])
+    a = UFIRFilter(model, horizon=3)
+    b = UFIRFilter(model, horizon=3, method="iterative")
+    x = np.array([0.5, -1.0, 2.0])
+    for _ in range(8):
+        ea, eb = a.step(x[:1]), b.step(x[:1])
+        np.testing.assert_allclose(eb, ea, rtol=1e-10, atol=1e-12)
+        x = A @ x
+    np.testing.assert_allclose(eb, np.linalg.matrix_power(A, -1) @ x, rtol=1e-9)
+
+
+def test_the_covariance_scale_of_a_time_varying_model_is_its_first_steps_variance() -> None:
+    """``P`` = the noise power gain (the FIR filter's ``P`` with ``Q = 0``, ``R = I``) times
+    ``σ² = mean diag R(0)`` (the class docstring), also when ``R`` varies with ``k``."""
+    m = lti(1)
+    A, C = np.asarray(m.A), np.asarray(m.C)
+    varying = TimeVaryingLinearModel(A=lambda k: A * (1 + 0.1 * np.sin(k)),
+                                     C=lambda k: C * (1 + 0.2 * np.cos(k)), B=m.B, Q=m.Q,
+                                     R=lambda k: np.diag([0.5, 2.0]) * (1.0 + 0.5 * k))
+    u = UFIRFilter(varying, horizon=5)
+    f = FIRFilter(varying.replace(Q=np.zeros((3, 3)), R=np.eye(2)), horizon=5)
+    stream(u), stream(f)
+    assert u.noise_scale == pytest.approx(1.25)
+    np.testing.assert_allclose(u.P, 1.25 * f.P, rtol=1e-9)
