@@ -1,4 +1,4 @@
-"""Speed of the JAX backend against the numpy one (``fir-gym speed training``, issue 28).
+"""Speed of the JAX backend against the numpy one (``fir-gym speed training``).
 
 Two ratios, each of env-steps per second measured in the same run as its reference:
 

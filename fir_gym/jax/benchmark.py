@@ -12,7 +12,7 @@ its 95 % interval from the same bootstrap as the SB3 benchmark's
 training times and the training rate. Given an SB3 benchmark (``--compare-with``: its
 folder, or a Markdown file of its tables such as its ``BENCHMARK.md`` or README.md's
 benchmark section), each row stands beside the SB3 row of the same plant and kind, with the
-verdict the issue asks for: is the JAX IQM inside the SB3 interval? The two backends'
+verdict: is the JAX IQM inside the SB3 interval? The two backends'
 evaluation episodes are drawn from different generators (the same distribution, not the
 same draws).
 """
