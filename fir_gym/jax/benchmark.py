@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from fir_gym.robustness.plan import EVAL_SEED
 from fir_gym.tables import format_table
 from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS
 from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
@@ -81,6 +82,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
         save(result, out / job["env_id"].split("/")[-1] / job["kind"])
         rows.append({"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
                      "episode_returns": result.final_returns,
+                     "numpy_returns": numpy_returns(result, job["env_kwargs"],
+                                                    job["episodes"]),
                      "compile_seconds": result.compile_seconds,
                      "train_seconds": result.train_seconds,
                      "steps_trained": result.steps_trained,
@@ -93,6 +96,51 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
     (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "BENCHMARK.md").write_text(markdown(report) + "\n")
     return report
+
+
+def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
+                  seed: int = EVAL_SEED) -> list[list[float]]:
+    """Each trained seed's deterministic policy played in the *numpy* env (``make_single_env``,
+    as the SB3 benchmark builds it) on the SB3 benchmark's evaluation episodes (episode ``i``
+    from ``reset(seed=seed + i)``): ``[seed][episode]`` raw returns. The JAX and the numpy
+    plants agree given the same noise (the parity tests), so these rows differ from the SB3
+    ones only by the controllers — the same episodes, not merely the same distribution."""
+    import jax
+    import numpy as np
+
+    from fir_gym.training.vec_env import make_single_env
+
+    from .train import make_algorithm, make_env
+
+    env_j, params = make_env(result.env_id, result.kind, env_kwargs)
+    algo = make_algorithm(env_j, params, result.recipe)
+
+    @jax.jit
+    def act(actor: Any, rms: Any, obs: Any) -> Any:
+        seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
+        return algo.actor.apply(actor, seen[None], method="mean_action")[0]
+
+    kind = result.kind
+    env = (make_single_env(result.env_id, observation="true", **env_kwargs) if kind == "true"
+           else make_single_env(result.env_id, **env_kwargs) if kind == "measurement"
+           else make_single_env(result.env_id, estimator=kind, **env_kwargs))
+    ts = result.train_state
+    out = []
+    for i in range(len(result.seeds)):
+        actor = jax.tree.map(lambda x, i=i: x[i], ts.actor_ts.params)
+        rms = jax.tree.map(lambda x, i=i: x[i], ts.obs_rms_state)
+        returns = []
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done = 0.0, False
+            while not done:
+                action = np.asarray(act(actor, rms, np.asarray(obs, dtype=np.float64)))
+                obs, reward, terminated, truncated, _ = env.step(action.astype(np.float32))
+                total, done = total + float(reward), terminated or truncated
+            returns.append(total)
+        out.append(returns)
+    env.close()
+    return out
 
 
 def _sb3_tables(source: str | Path) -> dict[str, dict[str, dict[str, Any]]]:
@@ -154,16 +202,20 @@ def summarise(rows: list[dict[str, Any]], sb3: dict[str, dict[str, dict[str, Any
     for env_id in dict.fromkeys(r["env_id"] for r in rows):
         mine = [r for r in rows if r["env_id"] == env_id]
         draws = episode_bootstrap({r["kind"]: r["episode_returns"] for r in mine})
+        numpy_draws = episode_bootstrap({r["kind"]: r["numpy_returns"] for r in mine})
         table = []
         for r in mine:
             centre = iqm([sum(e) / len(e) for e in r["episode_returns"]])
             low, high = percentile_interval(draws[r["kind"]])
-            row = {**r, "iqm": centre, "low": low, "high": high}
+            on_numpy = iqm([sum(e) / len(e) for e in r["numpy_returns"]])
+            numpy_low, numpy_high = percentile_interval(numpy_draws[r["kind"]])
+            row = {**r, "iqm": centre, "low": low, "high": high, "numpy_iqm": on_numpy,
+                   "numpy_low": numpy_low, "numpy_high": numpy_high}
             other = (sb3 or {}).get(env_id, {}).get(r["kind"])
             if other is not None:
                 row.update(sb3_iqm=other["iqm"], sb3_low=other["low"], sb3_high=other["high"],
                            sb3_seeds=other.get("seeds"),
-                           inside=bool(other["low"] <= centre <= other["high"]))
+                           inside=bool(other["low"] <= on_numpy <= other["high"]))
             table.append(row)
         tables[env_id] = table
     return tables
@@ -176,19 +228,24 @@ def markdown(report: dict[str, Any]) -> str:
              "recipe, every seed of a plant and kind in one compiled program; IQM of the "
              "seeds' mean returns over the evaluation episodes, 95 % interval resampling "
              "episodes then seeds" + ("; `--quick`: the numbers mean nothing" if
-                                      report.get("quick") else "") + ")."]
+                                      report.get("quick") else "") + "). Each trained policy "
+             "is evaluated twice: in the JAX env (its own episode draws) and in the numpy env "
+             "on the SB3 benchmark's episodes (seeds 10000 + i) — the same plant (parity "
+             "tests) and the same draws as the SB3 rows, so only the controllers differ."]
     if compare:
         parts.append(f"Beside it, the stable-baselines3 backend's row of the same plant and "
-                     f"kind from `{compare}`; *inside*: the JAX IQM lies in the SB3 interval.")
+                     f"kind from `{compare}`; *inside*: the numpy-env IQM lies in the SB3 "
+                     "interval.")
     for env_id, table in report["tables"].items():
-        headers = ["kind", "seeds", "IQM return [95% CI]", "compile s", "train s",
-                   "env-steps/s"]
+        headers = ["kind", "seeds", "IQM return, JAX env [95% CI]",
+                   "IQM return, numpy env [95% CI]", "compile s", "train s", "env-steps/s"]
         if compare:
             headers += ["SB3 IQM [95% CI]", "inside"]
         lines = []
         for r in table:
             line = [r["kind"], len(r["seeds"]), f"{r['iqm']:.4g} [{r['low']:.4g}, "
-                    f"{r['high']:.4g}]", f"{r['compile_seconds']:.1f}",
+                    f"{r['high']:.4g}]", f"{r['numpy_iqm']:.4g} [{r['numpy_low']:.4g}, "
+                    f"{r['numpy_high']:.4g}]", f"{r['compile_seconds']:.1f}",
                     f"{r['train_seconds']:.1f}", f"{r['steps_per_second']:.3g}"]
             if compare:
                 line += ([f"{r['sb3_iqm']:.4g} [{r['sb3_low']:.4g}, {r['sb3_high']:.4g}]",

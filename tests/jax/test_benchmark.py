@@ -49,6 +49,10 @@ def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
     assert row["iqm"] == pytest.approx(iqm([sum(e) / len(e) for e in row["episode_returns"]]))
     assert row["low"] <= row["iqm"] <= row["high"]
     assert row["inside"] is True and row["sb3_iqm"] == -50.0       # inside (-1e9, 0]
+    # the same policies in the numpy env, on the SB3 benchmark's episodes
+    assert len(row["numpy_returns"]) == 2 and all(len(r) == 2 for r in row["numpy_returns"])
+    assert row["numpy_iqm"] == pytest.approx(
+        iqm([sum(e) / len(e) for e in row["numpy_returns"]]))
     text = (tmp_path / "jax" / "BENCHMARK.md").read_text()
     assert "fir_gym/Orbit-v0" in text and "inside" in text and "yes" in text
     assert (tmp_path / "jax" / "Orbit-v0" / "true" / "results.json").is_file()
