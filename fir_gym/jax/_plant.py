@@ -2,8 +2,16 @@
 
 from __future__ import annotations
 
+from typing import Any, ClassVar
+
+import gymnax.environments.environment as gymnax_env
 import jax
 import jax.numpy as jnp
+import numpy as np
+from gymnax.environments import spaces
+
+from ._x64 import require_x64
+from .kalman import Belief, WatchLimits, watch
 
 #: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`; PendulumSlider-v0
 #: has its own)
@@ -23,3 +31,96 @@ def psd_sqrt(M: jax.Array) -> jax.Array:
     that turns standard normals into a plant's noise increments."""
     w, V = jnp.linalg.eigh(M)
     return V * jnp.sqrt(jnp.clip(w, 0.0, None))
+
+
+def filter_prior(params: Any) -> tuple[jax.Array, jax.Array]:
+    """The filter's prior: the plant's initial-state mean and covariance, floored
+    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
+    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
+    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
+        jnp.maximum(1.0, x0 ** 2))
+
+
+def belief_of(state: Any) -> Belief:
+    """The filter's record held in an env state's ``filter_x``, ``filter_P``, ``nis``,
+    ``nis_run`` and ``diverged``."""
+    return Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged)
+
+
+def with_belief(state: Any, b: Belief) -> Any:
+    """``state`` with its filter fields replaced by the record ``b``."""
+    return state.replace(filter_x=b.x, filter_P=b.P, nis=b.nis, nis_run=b.nis_run,
+                         diverged=b.diverged)
+
+
+def watch_limits_of(params: Any) -> WatchLimits:
+    """The divergence watch's limits held in a plant's params."""
+    return WatchLimits(params.max_covariance_trace, params.nis_threshold, params.nis_patience)
+
+
+def watch_state(state: Any, x: jax.Array, P: jax.Array, nis: jax.Array,
+                limits: WatchLimits) -> Any:
+    """:meth:`fir_gym.estimators.base.Estimator._accept` (:func:`fir_gym.jax.kalman.watch`)
+    on the filter record of an env state: the state afterwards."""
+    return with_belief(state, watch(belief_of(state), x, P, nis, limits))
+
+
+class FilteredPlant(gymnax_env.Environment[Any, Any]):
+    """What the plants of :mod:`fir_gym.jax` share: an observation ``kind`` among
+    :attr:`kinds` (``"true"``, ``"measurement"`` and the plant's filter, last and default),
+    the filter kind's ``observation`` (:data:`OBSERVATIONS`), the views of the state
+    (:meth:`get_obs`: ``estimate+covariance`` gives the upper triangle of ``P`` row by row)
+    and the spaces; one action in ``[-1, 1]``. A subclass sets :attr:`kinds`, :attr:`n_x` and
+    :attr:`n_y`; its state has ``x``, ``y``, ``terminated`` and the filter fields."""
+
+    kinds: ClassVar[tuple[str, ...]]
+    n_x: ClassVar[int]
+    n_y: ClassVar[int]
+
+    def __init__(self, kind: str | None = None, observation: str = "estimate") -> None:
+        super().__init__()
+        estimator = self.kinds[-1]
+        kind = estimator if kind is None else kind
+        if kind not in self.kinds:
+            raise ValueError(f"kind must be one of {self.kinds}; got {kind!r}")
+        if observation not in OBSERVATIONS or (kind != estimator and observation != "estimate"):
+            raise ValueError(f"observation must be one of {OBSERVATIONS} for the {estimator!r} "
+                             "kind (and is not an option of the others); got "
+                             f"{observation!r} for {kind!r}")
+        require_x64()
+        self.kind, self.observation = kind, observation
+
+    @property
+    def num_actions(self) -> int:
+        return 1
+
+    def get_obs(self, state: Any, params: Any = None, key: jax.Array | None = None) -> Any:
+        if self.kind == "true":
+            return state.x
+        if self.kind == "measurement":
+            return state.y
+        if self.observation == "estimate+covariance":
+            rows, cols = np.triu_indices(self.n_x)
+            return {"estimate": state.filter_x, "covariance": state.filter_P[rows, cols]}
+        if self.observation == "estimate+measurement":
+            return {"estimate": state.filter_x, "measurement": state.y}
+        return state.filter_x
+
+    def is_terminated(self, state: Any, params: Any) -> jax.Array:
+        return state.terminated
+
+    def observation_space(self, params: Any) -> Any:
+        def box(n: int) -> spaces.Box:
+            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
+
+        n = self.n_x
+        if self.kind == "measurement":
+            return box(self.n_y)
+        if self.observation == "estimate+covariance":
+            return spaces.Dict({"estimate": box(n), "covariance": box(n * (n + 1) // 2)})
+        if self.observation == "estimate+measurement":
+            return spaces.Dict({"estimate": box(n), "measurement": box(self.n_y)})
+        return box(n)
+
+    def action_space(self, params: Any = None) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)

@@ -104,12 +104,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
-from gymnax.environments import spaces
 
-from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import STATE_LIMIT, FilteredPlant, filter_prior, watch_state
 from ._x64 import require_x64
-from .kalman import Belief, WatchLimits, kf_predict, kf_update, watch, watch_limits
+from .kalman import WatchLimits, kf_predict, kf_update, watch_limits
 
 #: paper 001's sea (Sidar & Doolin): the stiffness and damping terms and the noise input
 PAPER_A21 = -0.36
@@ -310,25 +309,8 @@ def carrier_motion_noise(key: jax.Array, params: CarrierMotionParams) -> Carrier
                               z[2:] * params.measurement_std)
 
 
-def kf_prior(params: CarrierMotionParams) -> tuple[jax.Array, jax.Array]:
-    """The KF's prior: the plant's initial-state mean and covariance, floored
-    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
-    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
-    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
-        jnp.maximum(1.0, x0 ** 2))
-
-
-def _kf_watch(state: CarrierMotionState, x: jax.Array, P: jax.Array, nis: jax.Array,
-              params: CarrierMotionParams) -> CarrierMotionState:
-    """:meth:`fir_gym.estimators.base.Estimator._accept` on the state's filter record."""
-    new = watch(Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged),
-                x, P, nis, params.watch)
-    return state.replace(filter_x=new.x, filter_P=new.P, nis=new.nis, nis_run=new.nis_run,
-                         diverged=new.diverged)
-
-
 # ---------------------------------------------------------------------------- the environment
-class CarrierMotion(gymnax_env.Environment[CarrierMotionState, CarrierMotionParams]):
+class CarrierMotion(FilteredPlant):
     """``fir_gym/CarrierMotion-v0`` as a gymnax environment observing ``kind`` (see the module
     docstring): ``"true"``, ``"measurement"`` or ``"kf"`` (the default, observing
     ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
@@ -343,15 +325,8 @@ class CarrierMotion(gymnax_env.Environment[CarrierMotionState, CarrierMotionPara
     ``estimation_error``, ``estimator_diverged`` and ``nis``.
     """
 
-    def __init__(self, kind: str = "kf", observation: str = "estimate") -> None:
-        super().__init__()
-        if kind not in KINDS:
-            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != "kf" and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'kf' kind (and "
-                             f"is not an option of the others); got {observation!r} for {kind!r}")
-        require_x64()
-        self.kind, self.observation = kind, observation
+    kinds = KINDS
+    n_x, n_y = 2, 1
 
     @property
     def default_params(self) -> CarrierMotionParams:
@@ -360,10 +335,6 @@ class CarrierMotion(gymnax_env.Environment[CarrierMotionState, CarrierMotionPara
     @property
     def name(self) -> str:
         return "fir_gym/CarrierMotion-v0"
-
-    @property
-    def num_actions(self) -> int:
-        return 1
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams
@@ -378,15 +349,15 @@ class CarrierMotion(gymnax_env.Environment[CarrierMotionState, CarrierMotionPara
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = jnp.asarray(params.C) @ x + noise.measurement
-        x0, P0 = kf_prior(params)
+        x0, P0 = filter_prior(params)
         state = CarrierMotionState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
                                    terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
                                    nis=jnp.asarray(jnp.nan),
                                    nis_run=jnp.asarray(0, dtype=jnp.int64),
                                    diverged=jnp.asarray(False))
         if self.kind == "kf":
-            state = _kf_watch(state, *kf_update(x0, P0, y, params.nominal_C, params.nominal_R),
-                              params)
+            state = watch_state(state, *kf_update(x0, P0, y, params.nominal_C, params.nominal_R),
+                                params.watch)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -441,41 +412,8 @@ class CarrierMotion(gymnax_env.Environment[CarrierMotionState, CarrierMotionPara
         if self.kind == "kf":
             xp, Pp = kf_predict(state.filter_x, state.filter_P, params.nominal_A_d,
                                 params.nominal_Q_d)
-            new = _kf_watch(new, *kf_update(xp, Pp, y, params.nominal_C, params.nominal_R),
-                            params)
+            new = watch_state(new, *kf_update(xp, Pp, y, params.nominal_C, params.nominal_R),
+                              params.watch)
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info
-
-    # ------------------------------------------------------------------ views
-    def get_obs(self, state: CarrierMotionState, params: CarrierMotionParams | None = None,
-                key: jax.Array | None = None) -> Any:
-        if self.kind == "true":
-            return state.x
-        if self.kind == "measurement":
-            return state.y
-        if self.observation == "estimate+covariance":
-            P = state.filter_P
-            return {"estimate": state.filter_x,
-                    "covariance": jnp.stack([P[0, 0], P[0, 1], P[1, 1]])}
-        if self.observation == "estimate+measurement":
-            return {"estimate": state.filter_x, "measurement": state.y}
-        return state.filter_x
-
-    def is_terminated(self, state: CarrierMotionState, params: CarrierMotionParams) -> jax.Array:
-        return state.terminated
-
-    def observation_space(self, params: CarrierMotionParams) -> Any:
-        def box(n: int) -> spaces.Box:
-            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
-
-        if self.kind == "measurement":
-            return box(1)
-        if self.observation == "estimate+covariance":
-            return spaces.Dict({"estimate": box(2), "covariance": box(3)})
-        if self.observation == "estimate+measurement":
-            return spaces.Dict({"estimate": box(2), "measurement": box(1)})
-        return box(2)
-
-    def action_space(self, params: CarrierMotionParams | None = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)

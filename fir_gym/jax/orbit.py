@@ -75,13 +75,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
-from gymnax.environments import spaces
 
-from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import (
+    STATE_LIMIT,
+    FilteredPlant,
+    filter_prior,
+    watch_limits_of,
+    watch_state,
+)
 from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
-from .kalman import Belief, WatchLimits, symmetrize, watch
+from .kalman import symmetrize
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)
 TRUE_MU = 19.92244165
@@ -309,27 +314,8 @@ def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array
     return x + K * e, P_new, e * W * e
 
 
-def ekf_watch(state: OrbitState, x: jax.Array, P: jax.Array, nis: jax.Array,
-              params: OrbitParams) -> OrbitState:
-    """:meth:`fir_gym.estimators.base.Estimator._accept` for one system: store the new
-    estimate where it is finite, count high NIS, raise the sticky ``diverged`` flag."""
-    new = watch(Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged),
-                x, P, nis, WatchLimits(params.max_covariance_trace, params.nis_threshold,
-                                       params.nis_patience))
-    return state.replace(filter_x=new.x, filter_P=new.P, nis=new.nis, nis_run=new.nis_run,
-                         diverged=new.diverged)
-
-
-def ekf_prior(params: OrbitParams) -> tuple[jax.Array, jax.Array]:
-    """The EKF's prior: the plant's initial-state mean and covariance, floored
-    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
-    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
-    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
-        jnp.maximum(1.0, x0 ** 2))
-
-
 # ---------------------------------------------------------------------------- the environment
-class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
+class Orbit(FilteredPlant):
     """``fir_gym/Orbit-v0`` as a gymnax environment observing ``kind`` (see the module
     docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default, observing
     ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
@@ -343,15 +329,8 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
     ``estimation_error``, ``estimator_diverged`` and ``nis``.
     """
 
-    def __init__(self, kind: str = "ekf", observation: str = "estimate") -> None:
-        super().__init__()
-        if kind not in KINDS:
-            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != "ekf" and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'ekf' kind (and "
-                             f"is not an option of the others); got {observation!r} for {kind!r}")
-        require_x64()
-        self.kind, self.observation = kind, observation
+    kinds = KINDS
+    n_x, n_y = 2, 1
 
     @property
     def default_params(self) -> OrbitParams:
@@ -360,10 +339,6 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
     @property
     def name(self) -> str:
         return "fir_gym/Orbit-v0"
-
-    @property
-    def num_actions(self) -> int:
-        return 1
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[Any, OrbitState]:
@@ -376,13 +351,14 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x[:1] + noise.measurement
-        x0, P0 = ekf_prior(params)
+        x0, P0 = filter_prior(params)
         state = OrbitState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
                            terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
                            nis=jnp.asarray(jnp.nan), nis_run=jnp.asarray(0, dtype=jnp.int64),
                            diverged=jnp.asarray(False))
         if self.kind == "ekf":
-            state = ekf_watch(state, *ekf_update(x0, P0, y, params.nominal_R), params)
+            state = watch_state(state, *ekf_update(x0, P0, y, params.nominal_R),
+                                watch_limits_of(params))
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -446,40 +422,8 @@ class Orbit(gymnax_env.Environment[OrbitState, OrbitParams]):
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,
                                        params.nominal_euler_dt, params.nominal_substeps)
             Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
-            new = ekf_watch(new, *ekf_update(xp, Pp, y, params.nominal_R), params)
+            new = watch_state(new, *ekf_update(xp, Pp, y, params.nominal_R),
+                              watch_limits_of(params))
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info
-
-    # ------------------------------------------------------------------ views
-    def get_obs(self, state: OrbitState, params: OrbitParams | None = None,
-                key: jax.Array | None = None) -> Any:
-        if self.kind == "true":
-            return state.x
-        if self.kind == "measurement":
-            return state.y
-        if self.observation == "estimate+covariance":
-            P = state.filter_P
-            return {"estimate": state.filter_x,
-                    "covariance": jnp.stack([P[0, 0], P[0, 1], P[1, 1]])}
-        if self.observation == "estimate+measurement":
-            return {"estimate": state.filter_x, "measurement": state.y}
-        return state.filter_x
-
-    def is_terminated(self, state: OrbitState, params: OrbitParams) -> jax.Array:
-        return state.terminated
-
-    def observation_space(self, params: OrbitParams) -> Any:
-        def box(n: int) -> spaces.Box:
-            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
-
-        if self.kind == "measurement":
-            return box(1)
-        if self.observation == "estimate+covariance":
-            return spaces.Dict({"estimate": box(2), "covariance": box(3)})
-        if self.observation == "estimate+measurement":
-            return spaces.Dict({"estimate": box(2), "measurement": box(1)})
-        return box(2)
-
-    def action_space(self, params: OrbitParams | None = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)

@@ -107,15 +107,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
-from gymnax.environments import spaces
 
-from ._plant import OBSERVATIONS, PRIOR_FLOOR
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import (
+    FilteredPlant,
+    belief_of,
+    filter_prior,
+    watch_limits_of,
+    with_belief,
+)
 from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import (
     Belief,
-    WatchLimits,
     ekf_predict,
     kf_update_innovation,
     symmetrize,
@@ -565,34 +569,13 @@ def pendulum_slider_noise(key: jax.Array, params: PendulumSliderParams) -> Pendu
 
 
 # ---------------------------------------------------------------------------- the EKF
-def ekf_prior(params: PendulumSliderParams) -> tuple[jax.Array, jax.Array]:
-    """The EKF's prior: the plant's initial-state mean and covariance, floored
-    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
-    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
-    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
-        jnp.maximum(1.0, x0 ** 2))
-
-
-def _limits(params: PendulumSliderParams) -> WatchLimits:
-    return WatchLimits(params.max_covariance_trace, params.nis_threshold, params.nis_patience)
-
-
-def _belief(state: PendulumSliderState) -> Belief:
-    return Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged)
-
-
-def _with_belief(state: PendulumSliderState, b: Belief) -> PendulumSliderState:
-    return state.replace(filter_x=b.x, filter_P=b.P, nis=b.nis, nis_run=b.nis_run,
-                         diverged=b.diverged)
-
-
 def ekf_correct(b: Belief, xp: jax.Array, Pp: jax.Array, y: jax.Array,
                 params: PendulumSliderParams) -> Belief:
     """The Joseph-form update of the prior ``(xp, Pp)`` with ``y`` (``h(x) = x``, ``H = I``,
     the model's ``R``), then the divergence watch against the record ``b``
     (``ExtendedKalmanFilter._correct`` and ``Estimator._accept``)."""
     x_new, P_new, nis = kf_update_innovation(xp, Pp, y - xp, jnp.eye(4), params.nominal_R)
-    return watch(b, x_new, P_new, nis, _limits(params))
+    return watch(b, x_new, P_new, nis, watch_limits_of(params))
 
 
 def ekf_model(params: PendulumSliderParams
@@ -615,7 +598,7 @@ def ekf_step(b: Belief, y: jax.Array, u: jax.Array, params: PendulumSliderParams
 
 
 # ---------------------------------------------------------------------------- the environment
-class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderParams]):
+class PendulumSlider(FilteredPlant):
     """``fir_gym/PendulumSlider-v0`` as a gymnax environment observing ``kind`` (see the
     module docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default, observing
     ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
@@ -629,15 +612,8 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
     ``estimate``, ``estimation_error``, ``estimator_diverged`` and ``nis``.
     """
 
-    def __init__(self, kind: str = "ekf", observation: str = "estimate") -> None:
-        super().__init__()
-        if kind not in KINDS:
-            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != "ekf" and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'ekf' kind (and "
-                             f"is not an option of the others); got {observation!r} for {kind!r}")
-        require_x64()
-        self.kind, self.observation = kind, observation
+    kinds = KINDS
+    n_x, n_y = 4, 4
 
     @property
     def default_params(self) -> PendulumSliderParams:
@@ -646,10 +622,6 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
     @property
     def name(self) -> str:
         return "fir_gym/PendulumSlider-v0"
-
-    @property
-    def num_actions(self) -> int:
-        return 1
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: PendulumSliderParams
@@ -664,13 +636,13 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x + noise.measurement
-        x0, P0 = ekf_prior(params)
+        x0, P0 = filter_prior(params)
         state = PendulumSliderState(
             time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y, terminated=jnp.asarray(False),
             filter_x=x0, filter_P=P0, nis=jnp.asarray(jnp.nan),
             nis_run=jnp.asarray(0, dtype=jnp.int64), diverged=jnp.asarray(False))
         if self.kind == "ekf":
-            state = _with_belief(state, ekf_correct(_belief(state), x0, P0, y, params))
+            state = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -751,45 +723,15 @@ class PendulumSlider(gymnax_env.Environment[PendulumSliderState, PendulumSliderP
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
         if self.kind == "ekf":
             if prediction is None:
-                belief = ekf_step(_belief(state), y, u, params)
+                belief = ekf_step(belief_of(state), y, u, params)
             else:                 # the model's interval came from the fused loop
                 xp, F = prediction
                 Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
-                belief = ekf_correct(_belief(state), xp, Pp, y, params)
-            new = _with_belief(new, belief)
+                belief = ekf_correct(belief_of(state), xp, Pp, y, params)
+            new = with_belief(new, belief)
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info
-
-    # ------------------------------------------------------------------ views
-    def get_obs(self, state: PendulumSliderState, params: PendulumSliderParams | None = None,
-                key: jax.Array | None = None) -> Any:
-        if self.kind == "true":
-            return state.x
-        if self.kind == "measurement":
-            return state.y
-        if self.observation == "estimate+covariance":
-            return {"estimate": state.filter_x, "covariance": state.filter_P[_TRIU]}
-        if self.observation == "estimate+measurement":
-            return {"estimate": state.filter_x, "measurement": state.y}
-        return state.filter_x
-
-    def is_terminated(self, state: PendulumSliderState, params: PendulumSliderParams
-                      ) -> jax.Array:
-        return state.terminated
-
-    def observation_space(self, params: PendulumSliderParams) -> Any:
-        def box(n: int) -> spaces.Box:
-            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
-
-        if self.observation == "estimate+covariance":
-            return spaces.Dict({"estimate": box(4), "covariance": box(10)})
-        if self.observation == "estimate+measurement":
-            return spaces.Dict({"estimate": box(4), "measurement": box(4)})
-        return box(4)
-
-    def action_space(self, params: PendulumSliderParams | None = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
 
 
 def _action(action: Any) -> tuple[jax.Array, jax.Array]:

@@ -98,13 +98,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
-from gymnax.environments import spaces
 
-from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import (
+    STATE_LIMIT,
+    FilteredPlant,
+    filter_prior,
+    watch_limits_of,
+    watch_state,
+)
 from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
-from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
+from .kalman import ekf_predict, kf_update_innovation
 
 #: the two readings of eq (29) (``UNCERTAINTY_READINGS`` of the numpy plant)
 UNCERTAINTY_READINGS = ("state", "rate")
@@ -350,14 +355,6 @@ def uncertain_oscillator_noise(key: jax.Array, params: UncertainOscillatorParams
                                     jnp.sqrt(params.R) * z[1:])
 
 
-def ekf_prior(params: UncertainOscillatorParams) -> tuple[jax.Array, jax.Array]:
-    """The EKF's prior: the plant's initial-state mean and covariance, floored
-    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
-    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
-    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
-        jnp.maximum(1.0, x0 ** 2))
-
-
 def model_process_cov(params: UncertainOscillatorParams) -> jax.Array:
     """The model's ``G Q Gᵀ`` with ``G = [0; Δ; 0]`` of the nominal Δ and Q (``(G Q) Gᵀ``,
     the numpy model's ``G @ Q @ G.T``)."""
@@ -373,16 +370,11 @@ def ekf_update(state: UncertainOscillatorState, x: jax.Array, P: jax.Array, y: j
     H = jnp.asarray(_H)
     R = jnp.reshape(jnp.asarray(params.nominal_R, dtype=jnp.float64), (1, 1))
     x_new, P_new, nis = kf_update_innovation(x, P, y - x[:1], H, R)
-    new = watch(Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged),
-                x_new, P_new, nis, WatchLimits(params.max_covariance_trace, params.nis_threshold,
-                                               params.nis_patience))
-    return state.replace(filter_x=new.x, filter_P=new.P, nis=new.nis, nis_run=new.nis_run,
-                         diverged=new.diverged)
+    return watch_state(state, x_new, P_new, nis, watch_limits_of(params))
 
 
 # ---------------------------------------------------------------------------- the environment
-class UncertainOscillator(gymnax_env.Environment[UncertainOscillatorState,
-                                                 UncertainOscillatorParams]):
+class UncertainOscillator(FilteredPlant):
     """``fir_gym/UncertainOscillator-v0`` as a gymnax environment observing ``kind`` (see the
     module docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default, observing
     ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
@@ -397,15 +389,8 @@ class UncertainOscillator(gymnax_env.Environment[UncertainOscillatorState,
     ``nis``.
     """
 
-    def __init__(self, kind: str = "ekf", observation: str = "estimate") -> None:
-        super().__init__()
-        if kind not in KINDS:
-            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != "ekf" and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'ekf' kind (and "
-                             f"is not an option of the others); got {observation!r} for {kind!r}")
-        require_x64()
-        self.kind, self.observation = kind, observation
+    kinds = KINDS
+    n_x, n_y = 3, 1
 
     @property
     def default_params(self) -> UncertainOscillatorParams:
@@ -414,10 +399,6 @@ class UncertainOscillator(gymnax_env.Environment[UncertainOscillatorState,
     @property
     def name(self) -> str:
         return "fir_gym/UncertainOscillator-v0"
-
-    @property
-    def num_actions(self) -> int:
-        return 1
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: UncertainOscillatorParams
@@ -434,7 +415,7 @@ class UncertainOscillator(gymnax_env.Environment[UncertainOscillatorState,
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x[:1] + noise.measurement
-        x0, P0 = ekf_prior(params)
+        x0, P0 = filter_prior(params)
         state = UncertainOscillatorState(
             time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y, terminated=jnp.asarray(False),
             filter_x=x0, filter_P=P0, nis=jnp.asarray(jnp.nan),
@@ -512,37 +493,3 @@ class UncertainOscillator(gymnax_env.Environment[UncertainOscillatorState,
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info
-
-    # ------------------------------------------------------------------ views
-    def get_obs(self, state: UncertainOscillatorState,
-                params: UncertainOscillatorParams | None = None,
-                key: jax.Array | None = None) -> Any:
-        if self.kind == "true":
-            return state.x
-        if self.kind == "measurement":
-            return state.y
-        if self.observation == "estimate+covariance":
-            rows, cols = np.triu_indices(3)
-            return {"estimate": state.filter_x, "covariance": state.filter_P[rows, cols]}
-        if self.observation == "estimate+measurement":
-            return {"estimate": state.filter_x, "measurement": state.y}
-        return state.filter_x
-
-    def is_terminated(self, state: UncertainOscillatorState,
-                      params: UncertainOscillatorParams) -> jax.Array:
-        return state.terminated
-
-    def observation_space(self, params: UncertainOscillatorParams) -> Any:
-        def box(n: int) -> spaces.Box:
-            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
-
-        if self.kind == "measurement":
-            return box(1)
-        if self.observation == "estimate+covariance":
-            return spaces.Dict({"estimate": box(3), "covariance": box(6)})
-        if self.observation == "estimate+measurement":
-            return spaces.Dict({"estimate": box(3), "measurement": box(1)})
-        return box(3)
-
-    def action_space(self, params: UncertainOscillatorParams | None = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)

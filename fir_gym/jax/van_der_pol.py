@@ -101,13 +101,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
-from gymnax.environments import spaces
 
-from ._plant import OBSERVATIONS, PRIOR_FLOOR, STATE_LIMIT
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
+from ._plant import (
+    STATE_LIMIT,
+    FilteredPlant,
+    filter_prior,
+    watch_limits_of,
+    watch_state,
+)
 from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
-from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
+from .kalman import ekf_predict, kf_update_innovation
 
 #: the observation kinds
 KINDS = ("true", "measurement", "ekf")
@@ -443,28 +448,8 @@ def ekf_correct(x: jax.Array, P: jax.Array, y: jax.Array, params: VanDerPolParam
     return kf_update_innovation(x, P, y - x[:1], H, jnp.reshape(params.model_R, (1, 1)))
 
 
-def ekf_watch(state: VanDerPolState, x: jax.Array, P: jax.Array, nis: jax.Array,
-              params: VanDerPolParams) -> VanDerPolState:
-    """:meth:`fir_gym.estimators.base.Estimator._accept` for one system (:func:`fir_gym.jax.
-    kalman.watch`): store the new estimate where it is finite, count high NIS, raise the
-    sticky ``diverged`` flag."""
-    new = watch(Belief(state.filter_x, state.filter_P, state.nis, state.nis_run, state.diverged),
-                x, P, nis, WatchLimits(params.max_covariance_trace, params.nis_threshold,
-                                       params.nis_patience))
-    return state.replace(filter_x=new.x, filter_P=new.P, nis=new.nis, nis_run=new.nis_run,
-                         diverged=new.diverged)
-
-
-def ekf_prior(params: VanDerPolParams) -> tuple[jax.Array, jax.Array]:
-    """The EKF's prior: the plant's initial-state mean and covariance, floored
-    (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""
-    x0 = jnp.asarray(params.initial_state, dtype=jnp.float64)
-    return x0, jnp.asarray(params.initial_state_cov) + PRIOR_FLOOR * jnp.diag(
-        jnp.maximum(1.0, x0 ** 2))
-
-
 # ---------------------------------------------------------------------------- the environment
-class VanDerPol(gymnax_env.Environment[VanDerPolState, VanDerPolParams]):
+class VanDerPol(FilteredPlant):
     """``fir_gym/VanDerPol-v0`` as a gymnax environment observing ``kind`` (see the module
     docstring): ``"true"``, ``"measurement"`` or ``"ekf"`` (the default, observing
     ``observation``: ``"estimate"``, ``"estimate+covariance"`` or ``"estimate+measurement"``).
@@ -480,15 +465,8 @@ class VanDerPol(gymnax_env.Environment[VanDerPolState, VanDerPolParams]):
     ``estimator_diverged`` and ``nis``.
     """
 
-    def __init__(self, kind: str = "ekf", observation: str = "estimate") -> None:
-        super().__init__()
-        if kind not in KINDS:
-            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != "ekf" and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the 'ekf' kind (and "
-                             f"is not an option of the others); got {observation!r} for {kind!r}")
-        require_x64()
-        self.kind, self.observation = kind, observation
+    kinds = KINDS
+    n_x, n_y = 2, 1
 
     @property
     def default_params(self) -> VanDerPolParams:
@@ -497,10 +475,6 @@ class VanDerPol(gymnax_env.Environment[VanDerPolState, VanDerPolParams]):
     @property
     def name(self) -> str:
         return "fir_gym/VanDerPol-v0"
-
-    @property
-    def num_actions(self) -> int:
-        return 1
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: VanDerPolParams
@@ -516,14 +490,15 @@ class VanDerPol(gymnax_env.Environment[VanDerPolState, VanDerPolParams]):
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x[:1] + noise.measurement
-        x0, P0 = ekf_prior(params)
+        x0, P0 = filter_prior(params)
         state = VanDerPolState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
                                terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
                                nis=jnp.asarray(jnp.nan),
                                nis_run=jnp.asarray(0, dtype=jnp.int64),
                                diverged=jnp.asarray(False))
         if self.kind == "ekf":
-            state = ekf_watch(state, *ekf_correct(x0, P0, y, params), params)
+            state = watch_state(state, *ekf_correct(x0, P0, y, params),
+                                watch_limits_of(params))
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -593,40 +568,8 @@ class VanDerPol(gymnax_env.Environment[VanDerPolState, VanDerPolParams]):
                     lambda xf, uf: heun_model_interval(xf, uf[0] * params.nominal_u_max,
                                                        params.nominal_epsilon, tau_model,
                                                        params.nominal_substeps))
-            new = ekf_watch(new, *ekf_correct(xp, Pp, y, params), params)
+            new = watch_state(new, *ekf_correct(xp, Pp, y, params),
+                              watch_limits_of(params))
             info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, reward, terminated, info
-
-    # ------------------------------------------------------------------ views
-    def get_obs(self, state: VanDerPolState, params: VanDerPolParams | None = None,
-                key: jax.Array | None = None) -> Any:
-        if self.kind == "true":
-            return state.x
-        if self.kind == "measurement":
-            return state.y
-        if self.observation == "estimate+covariance":
-            P = state.filter_P
-            return {"estimate": state.filter_x,
-                    "covariance": jnp.stack([P[0, 0], P[0, 1], P[1, 1]])}
-        if self.observation == "estimate+measurement":
-            return {"estimate": state.filter_x, "measurement": state.y}
-        return state.filter_x
-
-    def is_terminated(self, state: VanDerPolState, params: VanDerPolParams) -> jax.Array:
-        return state.terminated
-
-    def observation_space(self, params: VanDerPolParams) -> Any:
-        def box(n: int) -> spaces.Box:
-            return spaces.Box(-jnp.inf, jnp.inf, (n,), jnp.float64)
-
-        if self.kind == "measurement":
-            return box(1)
-        if self.observation == "estimate+covariance":
-            return spaces.Dict({"estimate": box(2), "covariance": box(3)})
-        if self.observation == "estimate+measurement":
-            return spaces.Dict({"estimate": box(2), "measurement": box(1)})
-        return box(2)
-
-    def action_space(self, params: VanDerPolParams | None = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
