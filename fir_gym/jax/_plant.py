@@ -8,6 +8,7 @@ import gymnax.environments.environment as gymnax_env
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import struct
 from gymnax.environments import spaces
 
 from ._x64 import require_x64
@@ -124,3 +125,29 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
     def action_space(self, params: Any = None) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
+
+
+@struct.dataclass
+class PlantState(gymnax_env.EnvState):
+    """A plant's state in :mod:`fir_gym.jax`: the step count, the true state ``x``, the last
+    measurement ``y`` (a failed step repeats it), ``terminated``, and the filter's record
+    (mean, covariance, this step's NIS, the run of high NIS, the sticky ``diverged`` flag;
+    :func:`belief_of`). Each plant subclasses it under its own name."""
+
+    time: Any
+    x: Any
+    y: Any
+    terminated: Any
+    filter_x: Any
+    filter_P: Any
+    nis: Any
+    nis_run: Any
+    diverged: Any
+
+    @classmethod
+    def start(cls, x: jax.Array, y: jax.Array, x0: jax.Array, P0: jax.Array) -> Any:
+        """The state at a reset: step 0, the filter at its prior ``N(x0, P0)`` (no NIS yet)."""
+        return cls(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
+                   terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
+                   nis=jnp.asarray(jnp.nan), nis_run=jnp.asarray(0, dtype=jnp.int64),
+                   diverged=jnp.asarray(False))

@@ -106,7 +106,7 @@ import numpy as np
 from flax import struct
 
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
-from ._plant import STATE_LIMIT, FilteredPlant, filter_prior, watch_state
+from ._plant import STATE_LIMIT, FilteredPlant, PlantState, filter_prior, watch_state
 from ._x64 import require_x64
 from .kalman import WatchLimits, kf_predict, kf_update, watch_limits
 
@@ -153,18 +153,8 @@ class CarrierMotionParams(gymnax_env.EnvParams):
 
 
 @struct.dataclass
-class CarrierMotionState(gymnax_env.EnvState):
+class CarrierMotionState(PlantState):
     """The plant, its last observation and the KF (mean, covariance, watch)."""
-
-    time: Any
-    x: Any                    # true state [x1, x2]
-    y: Any                    # the last measurement (1,): a failed step repeats it
-    terminated: Any
-    filter_x: Any             # KF mean (the last finite one)
-    filter_P: Any             # KF covariance
-    nis: Any                  # this step's normalised innovation squared
-    nis_run: Any              # consecutive NIS above the threshold
-    diverged: Any             # sticky divergence flag
 
 
 @struct.dataclass
@@ -350,11 +340,7 @@ class CarrierMotion(FilteredPlant):
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = jnp.asarray(params.C) @ x + noise.measurement
         x0, P0 = filter_prior(params)
-        state = CarrierMotionState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
-                                   terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
-                                   nis=jnp.asarray(jnp.nan),
-                                   nis_run=jnp.asarray(0, dtype=jnp.int64),
-                                   diverged=jnp.asarray(False))
+        state = CarrierMotionState.start(x, y, x0, P0)
         if self.kind == "kf":
             state = watch_state(state, *kf_update(x0, P0, y, params.nominal_C, params.nominal_R),
                                 params.watch)

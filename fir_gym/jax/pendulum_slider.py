@@ -111,6 +111,7 @@ from flax import struct
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
 from ._plant import (
     FilteredPlant,
+    PlantState,
     belief_of,
     filter_prior,
     watch_limits_of,
@@ -203,18 +204,8 @@ class PendulumSliderParams(gymnax_env.EnvParams):
 
 
 @struct.dataclass
-class PendulumSliderState(gymnax_env.EnvState):
+class PendulumSliderState(PlantState):
     """The plant, its last observation and the EKF (mean, covariance, watch)."""
-
-    time: Any
-    x: Any                    # true state [x, ẋ, θ, θ̇]
-    y: Any                    # the last measurement (4,): a failed step repeats it
-    terminated: Any
-    filter_x: Any             # EKF mean (the last finite one)
-    filter_P: Any             # EKF covariance
-    nis: Any                  # this step's normalised innovation squared
-    nis_run: Any              # consecutive NIS above the threshold
-    diverged: Any             # sticky divergence flag
 
 
 @struct.dataclass
@@ -637,10 +628,7 @@ class PendulumSlider(FilteredPlant):
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x + noise.measurement
         x0, P0 = filter_prior(params)
-        state = PendulumSliderState(
-            time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y, terminated=jnp.asarray(False),
-            filter_x=x0, filter_P=P0, nis=jnp.asarray(jnp.nan),
-            nis_run=jnp.asarray(0, dtype=jnp.int64), diverged=jnp.asarray(False))
+        state = PendulumSliderState.start(x, y, x0, P0)
         if self.kind == "ekf":
             state = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
         return self.get_obs(state, params), state

@@ -106,6 +106,7 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
+    PlantState,
     filter_prior,
     watch_limits_of,
     watch_state,
@@ -165,18 +166,8 @@ class VanDerPolParams(gymnax_env.EnvParams):
 
 
 @struct.dataclass
-class VanDerPolState(gymnax_env.EnvState):
+class VanDerPolState(PlantState):
     """The plant, its last observation and the EKF (mean, covariance, watch)."""
-
-    time: Any
-    x: Any                    # true state [x1, x2]
-    y: Any                    # the last measurement (1,): a failed step repeats it
-    terminated: Any
-    filter_x: Any             # EKF mean (the last finite one)
-    filter_P: Any             # EKF covariance
-    nis: Any                  # this step's normalised innovation squared
-    nis_run: Any              # consecutive NIS above the threshold
-    diverged: Any             # sticky divergence flag
 
 
 @struct.dataclass
@@ -491,11 +482,7 @@ class VanDerPol(FilteredPlant):
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
         y = x[:1] + noise.measurement
         x0, P0 = filter_prior(params)
-        state = VanDerPolState(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
-                               terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
-                               nis=jnp.asarray(jnp.nan),
-                               nis_run=jnp.asarray(0, dtype=jnp.int64),
-                               diverged=jnp.asarray(False))
+        state = VanDerPolState.start(x, y, x0, P0)
         if self.kind == "ekf":
             state = watch_state(state, *ekf_correct(x0, P0, y, params),
                                 watch_limits_of(params))
