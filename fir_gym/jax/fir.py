@@ -1,0 +1,284 @@
+"""The extended FIR filter (paper 000) as pure JAX steps, for one system.
+
+The JAX twin of :class:`fir_gym.estimators.efir.ExtendedFIRFilter` (the numpy reference)
+as :func:`fir_gym.wrappers.estimator_observation.build_estimator` configures it for a
+plant: the plant's ``model``, ``x0``/``P0`` its initial-state distribution
+(:func:`fir_gym.wrappers.estimator_observation.prior_of`), ``startup="prior"``, and the
+defaults ``form="filter"`` (window ``y[k−L+1..k]``) and ``nominal="open-loop"``.
+
+**The filter** (paper 000, eqs 3–13): a nominal trajectory runs open loop from ``x0``
+under the applied inputs, ``x̄[k] = f(x̄[k−1], u[k−1])`` (eq 4); the perturbation ``δx``
+obeys the model linearised along it, ``F[k−1] = ∂f/∂x`` at ``x̄[k−1]`` (eqs 5–6), and is
+measured through ``δy[k] = y[k] − H x̄[k]`` (eqs 7–10); the estimate is ``x̂[k] = x̄[k] +
+δx̂[k]`` (eq 11) with ``δx̂`` the minimum-variance unbiased FIR estimate over the window
+(eqs 12–13, the gain of Theorem 1). The gain is never formed: a bank of ``L = horizon``
+staggered windows runs the two-stage recursion (docs/papers.md#000-two-stage-form,
+:class:`fir_gym.estimators._fir_bank.WindowBank`) — one window starts at every step and
+the oldest, full one is read out (:func:`bank_predict`, :func:`bank_restart`,
+:func:`bank_update`, :func:`bank_estimate`). Window ``w``'s block ``Z[w] = [[P | T | x̄],
+[· | −𝓕 | b]]`` (``2n × (2n+1)``) holds a Kalman filter started at ``x̄ = 0, P = 0``, its
+sensitivity ``T = ∂x̄/∂δx_start``, and the normal equations ``𝓕 = Σ (C T⁻)ᵀ Σ⁻¹ (C T⁻)``,
+``b = Σ (C T⁻)ᵀ Σ⁻¹ e``; its estimate is ``x̄ + T V b`` with covariance ``P + T V Tᵀ``,
+``V = 𝓕⁻¹``. With ``Q = 0`` (Orbit-v0) ``P`` stays 0 and the estimate is the weighted
+least-squares fit of the window start.
+
+**Start-up** (``startup="prior"``): while the window is not yet full (``k < L − 1``) the
+window that began at ``x0`` takes ``N(x0, P0)`` as the prior of its start state, ``V =
+(P0⁻¹ + 𝓕)⁻¹ = (I + P0 𝓕)⁻¹ P0`` — the Kalman filter's estimate from that prior on the
+linearised model. **Rank-deficient fallback**: a full window whose ``𝓕`` is not regular
+(:func:`information_is_regular`, the smallest eigenvalue of its unit-diagonal version
+below :data:`RANK_RTOL`) gives the previous estimate predicted, ``f(x̂, u)``, ``F P Fᵀ +
+Q`` (``F`` at ``x̂``); selected with ``jnp.where``, never a Python branch on data.
+
+**Consistency** (:mod:`fir_gym.estimators._consistency`, the NIS that
+:meth:`fir_gym.estimators._windowed.WindowedEstimator._accept` hands the watch): the new
+measurement against the filter's one-step prediction from its previous estimate, ``x⁻ =
+f(x̂, u)``, ``P⁻ = F P Fᵀ + Q``, ``S = H P⁻ Hᵀ + R``, ``NIS = eᵀ S⁻¹ e`` (at a reset the
+prior ``(x0, P0)`` in place of ``(x⁻, P⁻)``); NaN where ``S`` is not positive definite.
+
+**Interface** (:class:`fir_gym.jax.filters.FilterKind`): :func:`efir_start` builds the
+memory (:class:`EFIRMemory`: the bank, the nominal, the step count, the prior covariance
+and the last step's flags — fixed shapes, ``horizon`` static), :func:`efir_update` is the
+reset's update with ``y[0]`` (:meth:`fir_gym.wrappers.EstimatorObservation.reset`) and
+:func:`efir_predict_update` one env step under the applied action. Both take the filter's
+current estimate ``(x, P)`` — the record the divergence watch keeps
+(:func:`fir_gym.jax.kalman.watch`, which is the numpy filter's ``state.x``, ``state.P``) —
+and return ``(memory, x, P, nis)``. The watch is the numpy one; the windowed filters' growth
+bound (a component of ``x̂`` beyond ``max_estimate``, which the numpy watch flags while it
+still stores that estimate) is handed to :func:`~fir_gym.jax.kalman.watch` as NaN in ``x``
+and ``P``: the flag is the same, the record keeps the previous estimate instead.
+
+The numpy reference runs with ``numba`` absent (:data:`fir_gym.estimators.compiled.ENABLED`
+false) on its numpy path, whose operations these follow in its order (its compiled twin
+agrees with it to round-off). Every function is pure and shape-static: ``jit``- and
+``vmap``-able.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from ._plant import FilterModel
+from .kalman import symmetrize
+
+#: :data:`fir_gym.estimators._fir_bank.RANK_RTOL`: an information matrix counts as singular
+#: when the smallest eigenvalue of its unit-diagonal version is below this
+RANK_RTOL = 1e-12
+#: :data:`fir_gym.estimators._consistency.MAX_ESTIMATE`: the growth bound's default
+MAX_ESTIMATE = 1e12
+
+
+# ---------------------------------------------------------------------------- the window bank
+def _times_rows(M: jax.Array, X: jax.Array) -> jax.Array:
+    """``M X_w`` for every window ``w`` of ``X`` ``(W, k, m)``: ``Σ_j M[:, j] X_w[j, :]``,
+    summed in ``j`` order as a loop of products over the few rows (XLA fuses it; a batched
+    ``dot`` of such small matrices costs several times more on a CPU)."""
+    out = M[None, :, 0, None] * X[:, None, 0, :]
+    for j in range(1, M.shape[1]):
+        out = out + M[None, :, j, None] * X[:, None, j, :]
+    return out
+
+
+def bank_blank(n: int) -> jax.Array:
+    """A window as it starts: ``x̄ = 0, P = 0, T = I, 𝓕 = b = 0`` (``2n × (2n+1)``)."""
+    return jnp.zeros((2 * n, 2 * n + 1)).at[:n, n:2 * n].set(jnp.eye(n))
+
+
+def bank_start(n_windows: int, n: int) -> jax.Array:
+    """``n_windows`` blank windows, ``Z`` of shape ``(n_windows, 2n, 2n+1)`` (window first;
+    :class:`fir_gym.estimators._fir_bank.WindowBank`'s ``Z[b, :, w, :]``)."""
+    return jnp.broadcast_to(bank_blank(n), (n_windows, 2 * n, 2 * n + 1))
+
+
+def bank_restart(Z: jax.Array, w: jax.Array) -> jax.Array:
+    """Window ``w`` afresh (:meth:`WindowBank.restart`, no reference state)."""
+    n = Z.shape[1] // 2
+    chosen = (jnp.arange(Z.shape[0]) == w)[:, None, None]   # a select, not a scatter: fuses
+    return jnp.where(chosen, bank_blank(n), Z)
+
+
+def bank_predict(Z: jax.Array, A: jax.Array, Q: jax.Array | None,
+                 Bu: jax.Array | None = None) -> jax.Array:
+    """The time update of every window (:meth:`WindowBank.predict`, one matrix ``A`` shared):
+    ``[P | T | x̄] ← A [P | T | x̄]``, then ``P ← (A P) Aᵀ + Q`` (skipped with ``Q = None``,
+    where ``P`` stays 0) and ``x̄ ← x̄ + B u``."""
+    n = Z.shape[1] // 2
+    top = _times_rows(A, Z[:, :n])
+    if Q is not None:
+        P = _times_rows(A, top[:, :, :n].swapaxes(1, 2)).swapaxes(1, 2) + Q
+        top = jnp.concatenate([P, top[:, :, n:]], axis=2)
+    if Bu is not None:
+        top = top.at[:, :, 2 * n].add(Bu)
+    return jnp.concatenate([top, Z[:, n:]], axis=1)
+
+
+def bank_update(Z: jax.Array, C: jax.Array, R: jax.Array, y: jax.Array) -> jax.Array:
+    """The measurement update of every window with ``y = C x + v``, ``v ~ N(0, R)``
+    (:meth:`WindowBank.update`): ``r = C [P | T | x̄] − [0 | 0 | y] = [C P | C T | −e]``,
+    ``Σ = C P Cᵀ + R``, ``Z −= [K; W] ⊗ r`` with ``[K; W] = [P Cᵀ; (C T)ᵀ] Σ⁻¹`` (one
+    channel: a division; more: a solve, channel by channel as the reference)."""
+    n, p = Z.shape[1] // 2, C.shape[0]
+    r = _times_rows(C, Z[:, :n])                                   # (W, p, 2n+1)
+    r = r.at[:, :, 2 * n].add(-y)
+    if p == 1:
+        CPC = _times_rows(C, r[:, 0, None, :n].swapaxes(1, 2))[:, 0, 0]   # (W,)
+        g = (r[:, 0, :2 * n] / (CPC + R[0, 0])[:, None])[:, None]  # (W, 1, 2n)
+    else:
+        Sig = _times_rows(C, r[:, :, :n].swapaxes(1, 2)).swapaxes(1, 2) + R
+        g = jnp.linalg.solve(Sig, r[:, :, :2 * n])                 # (W, p, 2n)
+    for q in range(p):
+        Z = Z - g[:, q, :, None] * r[:, q, None, :]
+    return Z
+
+
+def information_is_regular(F: jax.Array) -> jax.Array:
+    """Whether the information matrix ``F`` is numerically invertible: the tests of
+    :func:`fir_gym.estimators._fir_bank.spd_inverse` for one system (LAPACK path), in its
+    order of sufficiency — ``‖Fs⁻¹‖²_F < RANK_RTOL⁻²``, else ``det Fs > RANK_RTOL
+    n^(n−1)``, else ``λ_min(Fs) > RANK_RTOL``, ``Fs = D^(-1/2) F D^(-1/2)`` the
+    unit-diagonal version (:func:`fir_gym.estimators._fir_bank.information_is_regular`)."""
+    n = F.shape[0]
+    Fi = jnp.linalg.inv(F)
+    d = jnp.diagonal(F)
+    frobenius = d @ (Fi * Fi) @ d < RANK_RTOL ** -2
+    s = jnp.sqrt(jnp.abs(d))
+    s = jnp.where(s > 0, s, 1.0)
+    Fs = F / (s[:, None] * s[None, :])
+    by_det = jnp.linalg.det(Fs) > RANK_RTOL * n ** (n - 1)
+    finite = jnp.all(jnp.isfinite(Fs))
+    by_eig = finite & (jnp.linalg.eigvalsh(jnp.where(finite, Fs, 0.0))[0] > RANK_RTOL)
+    return frobenius | by_det | by_eig
+
+
+def bank_estimate(Z: jax.Array, w: jax.Array, prior: jax.Array | None = None
+                  ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Window ``w``'s estimate ``x̄ + T V b`` and covariance ``P + T V Tᵀ``
+    (:meth:`WindowBank.estimate`), and whether it is regular: ``V = 𝓕⁻¹`` (meaningless
+    where ``𝓕`` is singular: the caller falls back) or, with the ``prior`` covariance
+    ``Π0`` of the window start, ``V = (I + Π0 𝓕)⁻¹ Π0`` (always regular)."""
+    n = Z.shape[1] // 2
+    Zs = Z[w]
+    if prior is None:
+        F = -Zs[n:, n:2 * n]
+        regular = information_is_regular(F)
+        V = jnp.linalg.inv(jnp.where(regular, F, jnp.eye(n)))
+    else:
+        V = jnp.linalg.solve(jnp.eye(n) - prior @ Zs[n:, n:2 * n], prior)
+        regular = jnp.asarray(True)
+    T = Zs[:n, n:2 * n]
+    TV = T @ V
+    return Zs[:n, 2 * n] + TV @ Zs[n:, 2 * n], Zs[:n, :n] + TV @ T.T, regular
+
+
+# ---------------------------------------------------------------------------- the NIS
+def spd_inverse(S: jax.Array) -> jax.Array:
+    """``S⁻¹`` of a symmetric positive-definite ``S``, NaN where it is not
+    (:func:`fir_gym.estimators._kalman_linalg.spd_inverse`: closed forms for one and two
+    channels, Cholesky beyond)."""
+    m = S.shape[0]
+    if m == 1:
+        return jnp.where(S > 0.0, 1.0 / S, jnp.nan)
+    if m == 2:
+        a, b, d = S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1]
+        det = a * d - b * b
+        det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
+        return jnp.array([[d / det, -b / det], [-b / det, a / det]])
+    L = jnp.linalg.cholesky(S)                                      # NaN where not PD
+    return jax.scipy.linalg.cho_solve((L, True), jnp.eye(m))
+
+
+def innovation_nis(P_pred: jax.Array, e: jax.Array, H: jax.Array, R: jax.Array) -> jax.Array:
+    """``eᵀ S⁻¹ e``, ``S = H P⁻ Hᵀ + R`` symmetrised
+    (:func:`fir_gym.estimators._consistency.innovation_nis`); NaN where ``S`` is not PD."""
+    S = symmetrize(H @ P_pred @ H.T + R)
+    return jnp.einsum("i,ij,j->", e, spd_inverse(S), e)
+
+
+# ---------------------------------------------------------------------------- the filter
+@struct.dataclass
+class EFIRMemory:
+    """What the extended FIR filter keeps beyond its estimate: the bank ``Z`` (``horizon``
+    windows, ``(horizon, 2n, 2n+1)``), the open-loop ``nominal`` ``x̄`` (n,), the number
+    ``k`` of measurements consumed, the prior covariance ``P0`` of the start-up window, and
+    the last step's ``startup`` and ``rank_deficient`` flags (the numpy filter's
+    ``last_info``)."""
+
+    Z: Any
+    nominal: Any
+    k: Any
+    P0: Any
+    startup: Any
+    rank_deficient: Any
+
+
+def efir_start(x0: jax.Array, P0: jax.Array, horizon: int, model: FilterModel | None = None
+               ) -> EFIRMemory:
+    """The memory right after construction or ``reset`` with the prior ``N(x0, P0)``: blank
+    windows, the nominal at ``x0``, no measurement yet (``horizon`` is static: the bank's
+    length; ``model`` is not needed, the signature is the generic filters')."""
+    x0 = jnp.asarray(x0, dtype=jnp.float64)
+    return EFIRMemory(Z=bank_start(int(horizon), x0.shape[0]), nominal=x0,
+                      k=jnp.asarray(0, dtype=jnp.int64),
+                      P0=jnp.asarray(P0, dtype=jnp.float64), startup=jnp.asarray(True),
+                      rank_deficient=jnp.asarray(False))
+
+
+def _advance(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array | None,
+             model: FilterModel, max_estimate: float
+             ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
+    """One pass of :meth:`ExtendedFIRFilter._advance` (preceded by the NIS of
+    :meth:`WindowedEstimator._numpy_pass`); ``u`` is ``None`` at the reset's update."""
+    L = memory.Z.shape[0]
+    k, Z, nominal = memory.k, memory.Z, memory.nominal
+    H, R, Q = jnp.asarray(model.H), jnp.asarray(model.R), jnp.asarray(model.Q)
+    # the filter's one-step prediction: the NIS's (x⁻, P⁻) and the rank-deficient fallback
+    if u is None:                                     # the prior (x0, P0)
+        x_pred, P_pred = x, P
+    else:
+        x_pred, F_hat = model.f_and_F(x, u)
+        P_pred = F_hat @ P @ F_hat.T + Q
+    nis = innovation_nis(P_pred, y - H @ x_pred, H, R)
+    start = k < L - 1                                 # the window is not yet full
+    w_out = jnp.maximum(0, k - L + 1) % L             # the oldest window: read out now
+    if u is not None:                                 # nominal and perturbation time update
+        nominal, A = model.f_and_F(nominal, u)
+        Z = bank_predict(Z, A, Q)
+    Z = bank_restart(Z, k % L)
+    Z = bank_update(Z, H, R, y - H @ nominal)
+    dx, P_new, regular = bank_estimate(Z, w_out)
+    dx_prior, P_prior, _ = bank_estimate(Z, w_out, memory.P0)
+    dx = jnp.where(start, dx_prior, dx)
+    P_new = jnp.where(start, P_prior, P_new)
+    ok = regular | start
+    # rank deficient: the previous estimate predicted (at the reset: the prior itself)
+    x_new = jnp.where(ok, nominal + dx, x_pred)
+    P_new = jnp.where(ok, P_new, P_pred)
+    grown = ~(jnp.max(jnp.abs(x_new)) <= max_estimate)
+    x_out = jnp.where(grown, jnp.nan, x_new)
+    P_out = jnp.where(grown, jnp.nan, P_new)
+    memory = EFIRMemory(Z=Z, nominal=nominal, k=k + 1, P0=memory.P0, startup=start,
+                        rank_deficient=~ok)
+    return memory, x_out, P_out, nis
+
+
+def efir_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
+    """The first step from the prior ``(x, P) = (x0, P0)`` with ``y[0]`` (the numpy
+    filter's ``_update``, as :meth:`fir_gym.wrappers.EstimatorObservation.reset` calls it
+    on a fresh memory): ``(memory, x, P, nis)``, NaN in ``x`` and ``P`` where the numpy
+    watch would flag the estimate (non-finite, or a component beyond ``max_estimate``)."""
+    return _advance(memory, x, P, y, None, model, max_estimate)
+
+
+def efir_predict_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                        u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                        ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
+    """One env step: the previous estimate ``(x, P)`` (the watch's record), the new
+    measurement ``y`` and the applied action ``u`` (``_predict_update``):
+    ``(memory, x, P, nis)`` as :func:`efir_update`."""
+    return _advance(memory, x, P, y, u, model, max_estimate)
