@@ -91,38 +91,73 @@ def watch_state(state: Any, x: jax.Array, P: jax.Array, nis: jax.Array,
 
 class FilteredPlant(gymnax_env.Environment[Any, Any]):
     """What the plants of :mod:`fir_gym.jax` share: an observation ``kind`` among
-    :attr:`kinds` (``"true"``, ``"measurement"`` and the plant's filter, last and default),
-    the filter kind's ``observation`` (:data:`OBSERVATIONS`), the views of the state
-    (:meth:`get_obs`: ``estimate+covariance`` gives the upper triangle of ``P`` row by row)
-    and the spaces; one action in ``[-1, 1]``. A subclass sets :attr:`kinds`, :attr:`n_x` and
-    :attr:`n_y`; its state has ``x``, ``y``, ``terminated`` and the filter fields."""
+    :attr:`kinds` — ``"true"``, ``"measurement"``, ``"measurement-stack"`` (the last
+    ``horizon`` measurements and actions, :mod:`fir_gym.jax.measurement_stack`) and the
+    filters: the plant's own (:attr:`estimator`, the default: ``"ekf"``, or ``"kf"`` on a
+    linear plant; the plant runs it inside its step) and the generic ones of
+    :mod:`fir_gym.jax.filters` (run here on :meth:`filter_model`) —, a filter kind's
+    ``observation`` (:data:`OBSERVATIONS`), the views of the state (:meth:`get_obs`:
+    ``estimate+covariance`` gives the upper triangle of ``P`` row by row) and the spaces;
+    one action in ``[-1, 1]``.
+
+    ``horizon`` is the window of ``"measurement-stack"`` and of the windowed filters
+    (static: it sizes the state), :attr:`default_horizon` if not given — the numpy plant's
+    ``default_horizon``. A subclass sets :attr:`kinds`, :attr:`estimator`, :attr:`n_x`,
+    :attr:`n_y` (and :attr:`default_horizon`), implements :meth:`filter_model`, and ends its
+    reset with :meth:`finish_reset` and its step with :meth:`finish_step`; its state has
+    ``x``, ``y``, ``terminated``, the filter fields and ``memory``.
+    """
 
     kinds: ClassVar[tuple[str, ...]]
+    estimator: ClassVar[str]
     n_x: ClassVar[int]
     n_y: ClassVar[int]
+    default_horizon: ClassVar[int] = 10
 
-    def __init__(self, kind: str | None = None, observation: str = "estimate") -> None:
+    def __init__(self, kind: str | None = None, observation: str = "estimate",
+                 horizon: int | None = None) -> None:
         super().__init__()
-        estimator = self.kinds[-1]
-        kind = estimator if kind is None else kind
+        kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
             raise ValueError(f"kind must be one of {self.kinds}; got {kind!r}")
-        if observation not in OBSERVATIONS or (kind != estimator and observation != "estimate"):
-            raise ValueError(f"observation must be one of {OBSERVATIONS} for the {estimator!r} "
-                             "kind (and is not an option of the others); got "
+        filters = self.filter_kinds
+        if observation not in OBSERVATIONS or (kind not in filters
+                                               and observation != "estimate"):
+            raise ValueError(f"observation must be one of {OBSERVATIONS} for the filter kinds "
+                             f"{filters} (and is not an option of the others); got "
                              f"{observation!r} for {kind!r}")
+        if horizon is None:
+            horizon = self.default_horizon
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) \
+                or horizon < 1:
+            raise ValueError(f"horizon must be a positive integer; got {horizon!r}")
         require_x64()
-        self.kind, self.observation = kind, observation
+        self.kind, self.observation, self.horizon = kind, observation, int(horizon)
+
+    @property
+    def filter_kinds(self) -> tuple[str, ...]:
+        """The kinds of :attr:`kinds` that run a filter (the plant's own and the generic)."""
+        from .filters import GENERIC_FILTERS
+
+        return tuple(k for k in self.kinds if k == self.estimator or k in GENERIC_FILTERS)
+
+    def filter_model(self, params: Any) -> FilterModel:
+        """What the filters believe (the numpy plant's ``model``) under ``params``."""
+        raise NotImplementedError(f"{type(self).__name__} has no filter_model")
 
     @property
     def num_actions(self) -> int:
         return 1
 
     def get_obs(self, state: Any, params: Any = None, key: jax.Array | None = None) -> Any:
+        from .measurement_stack import stack_observation
+
         if self.kind == "true":
             return state.x
         if self.kind == "measurement":
             return state.y
+        if self.kind == "measurement-stack":
+            return stack_observation(state.memory)
         if self.observation == "estimate+covariance":
             rows, cols = np.triu_indices(self.n_x)
             return {"estimate": state.filter_x, "covariance": state.filter_P[rows, cols]}
@@ -140,6 +175,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         n = self.n_x
         if self.kind == "measurement":
             return box(self.n_y)
+        if self.kind == "measurement-stack":
+            return box(self.horizon * (self.n_y + 1))
         if self.observation == "estimate+covariance":
             return spaces.Dict({"estimate": box(n), "covariance": box(n * (n + 1) // 2)})
         if self.observation == "estimate+measurement":
@@ -149,13 +186,56 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     def action_space(self, params: Any = None) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
 
+    # ------------------------------------------------------------- the kinds' shared steps
+    def finish_reset(self, state: Any, params: Any) -> Any:
+        """A reset's state after the plant's own part: the stack's windows started, or a
+        generic filter's first update with ``y[0]`` from its prior (the state's filter
+        fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`)."""
+        from .filters import GENERIC_FILTERS
+        from .measurement_stack import stack_start
+
+        if self.kind == "measurement-stack":
+            return state.replace(memory=stack_start(state.y, self.horizon))
+        if self.kind in GENERIC_FILTERS:
+            kind = GENERIC_FILTERS[self.kind]
+            model = self.filter_model(params)
+            memory = kind.start(state.filter_x, state.filter_P, self.horizon, model)
+            memory, x, P, nis = kind.update(memory, state.filter_x, state.filter_P, state.y,
+                                            model)
+            state = watch_state(state.replace(memory=memory), x, P, nis,
+                                watch_limits_of(params))
+        return state
+
+    def finish_step(self, old: Any, new: Any, u: jax.Array, params: Any,
+                    info: dict[str, Any]) -> tuple[Any, Any, dict[str, Any]]:
+        """A step's observation, state and ``info`` after the plant's own part (``new``: the
+        plant moved, its measurement ``new.y``; the plant's own filter, if that is the kind,
+        already updated): the stack pushed, or a generic filter's step with the applied
+        action ``u`` — and for every filter kind the ``info`` keys ``estimate``,
+        ``estimation_error``, ``estimator_diverged`` and ``nis``."""
+        from .filters import GENERIC_FILTERS
+        from .measurement_stack import stack_push
+
+        if self.kind == "measurement-stack":
+            new = new.replace(memory=stack_push(old.memory, new.y, u))
+        elif self.kind in GENERIC_FILTERS:
+            kind = GENERIC_FILTERS[self.kind]
+            memory, x, P, nis = kind.predict_update(old.memory, old.filter_x, old.filter_P,
+                                                    new.y, u, self.filter_model(params))
+            new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params))
+        if self.kind in self.filter_kinds:
+            info.update(estimate=new.filter_x, estimation_error=new.x - new.filter_x,
+                        estimator_diverged=new.diverged, nis=new.nis)
+        return self.get_obs(new, params), new, info
+
 
 @struct.dataclass
 class PlantState(gymnax_env.EnvState):
     """A plant's state in :mod:`fir_gym.jax`: the step count, the true state ``x``, the last
     measurement ``y`` (a failed step repeats it), ``terminated``, and the filter's record
     (mean, covariance, this step's NIS, the run of high NIS, the sticky ``diverged`` flag;
-    :func:`belief_of`). Each plant subclasses it under its own name."""
+    :func:`belief_of`) and the kind's ``memory`` (a pytree: the stack's windows, a windowed
+    filter's bank; ``()`` for the others). Each plant subclasses it under its own name."""
 
     time: Any
     x: Any
@@ -166,10 +246,12 @@ class PlantState(gymnax_env.EnvState):
     nis: Any
     nis_run: Any
     diverged: Any
+    memory: Any = ()
 
     @classmethod
     def start(cls, x: jax.Array, y: jax.Array, x0: jax.Array, P0: jax.Array) -> Any:
-        """The state at a reset: step 0, the filter at its prior ``N(x0, P0)`` (no NIS yet)."""
+        """The state at a reset: step 0, the filter at its prior ``N(x0, P0)`` (no NIS yet),
+        no memory (:meth:`FilteredPlant.finish_reset` gives the kind's)."""
         return cls(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
                    terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
                    nis=jnp.asarray(jnp.nan), nis_run=jnp.asarray(0, dtype=jnp.int64),

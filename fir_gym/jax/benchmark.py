@@ -33,14 +33,15 @@ from .registry import PLANTS as JAX_PLANTS
 from .train import save, train
 
 #: the benchmark's learned kinds the JAX backend trains (the filter: the plant's own)
-JAX_KINDS = ("true", "measurement", "ekf", "kf")
+JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf")
 
 
 def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
                    plants: list[str] | None = None, kinds: list[str] | None = None
                    ) -> list[dict[str, Any]]:
     """Every (plant, kind) job: ``env_id``, ``kind``, ``seeds``, ``steps``, ``env_kwargs``,
-    ``episodes``. Refuses a plant the JAX backend or the benchmark does not have."""
+    ``kind_kwargs`` (the SB3 benchmark's, e.g. the windowed filters' horizon), ``episodes``.
+    Refuses a plant the JAX backend or the benchmark does not have."""
     chosen = list(plants) if plants else [p for p in PLANTS if p in JAX_PLANTS]
     for env_id in chosen:
         if env_id not in PLANTS or env_id not in JAX_PLANTS:
@@ -56,6 +57,7 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],
                          "env_kwargs": dict(spec["env_kwargs"]),
+                         "kind_kwargs": dict(spec["kind_kwargs"].get(kind, {})),
                          "episodes": QUICK["episodes"] if quick else EPISODES})
     return jobs
 
@@ -78,7 +80,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
             print(f"[{i + 1}/{len(jobs)}] {job['env_id']} {job['kind']}: {job['seeds']} "
                   f"seed(s) x {job['steps']} steps", file=sys.stderr, flush=True)
         result = train(job["env_id"], job["kind"], job["seeds"], steps=job["steps"],
-                       env_kwargs=job["env_kwargs"], episodes=job["episodes"])
+                       env_kwargs=job["env_kwargs"], kind_kwargs=job["kind_kwargs"],
+                       episodes=job["episodes"])
         save(result, out / job["env_id"].split("/")[-1] / job["kind"])
         rows.append({"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
                      "episode_returns": result.final_returns,
@@ -112,7 +115,7 @@ def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
 
     from .train import make_algorithm, make_env
 
-    env_j, params = make_env(result.env_id, result.kind, env_kwargs)
+    env_j, params = make_env(result.env_id, result.kind, env_kwargs, result.kind_kwargs)
     algo = make_algorithm(env_j, params, result.recipe)
 
     @jax.jit
@@ -120,10 +123,14 @@ def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
         seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
         return algo.actor.apply(actor, seen[None], method="mean_action")[0]
 
-    kind = result.kind
+    kind, options = result.kind, dict(result.kind_kwargs)
     env = (make_single_env(result.env_id, observation="true", **env_kwargs) if kind == "true"
            else make_single_env(result.env_id, **env_kwargs) if kind == "measurement"
-           else make_single_env(result.env_id, estimator=kind, **env_kwargs))
+           else make_single_env(result.env_id, observation="measurement-stack",
+                                stack_horizon=options.get("horizon"), **env_kwargs)
+           if kind == "measurement-stack"
+           else make_single_env(result.env_id, estimator=kind, estimator_kwargs=options,
+                                **env_kwargs))
     ts = result.train_state
     out = []
     for i in range(len(result.seeds)):

@@ -106,7 +106,7 @@ import numpy as np
 from flax import struct
 
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
-from ._plant import STATE_LIMIT, FilteredPlant, PlantState, filter_prior, watch_state
+from ._plant import STATE_LIMIT, FilteredPlant, FilterModel, PlantState, filter_prior, watch_state
 from ._x64 import require_x64
 from .kalman import WatchLimits, kf_predict, kf_update, watch_limits
 
@@ -117,7 +117,7 @@ PAPER_NOISE_INPUT = (0.6, -0.036)
 #: the numpy plant's worst per-step cost (``CarrierMotionEnv.cost_cap``)
 COST_CAP = 100.0
 #: the observation kinds (the estimator kind last)
-KINDS = ("true", "measurement", "kf")
+KINDS = ("true", "measurement", "measurement-stack", "kf")
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 MODEL_PARAMETERS = ("sample_period", "q", "v", "delta22", "delta_c", "a21", "a22",
                     "noise_input")
@@ -316,6 +316,8 @@ class CarrierMotion(FilteredPlant):
     """
 
     kinds = KINDS
+    estimator = "kf"
+    default_horizon = 50
     n_x, n_y = 2, 1
 
     @property
@@ -325,6 +327,17 @@ class CarrierMotion(FilteredPlant):
     @property
     def name(self) -> str:
         return "fir_gym/CarrierMotion-v0"
+
+    def filter_model(self, params: CarrierMotionParams) -> FilterModel:
+        """The KF's model (the numpy plant's ``model``): ``x ← A_d x`` (the action does not
+        enter it), the nominal ``C``, ``Q_d`` and ``R``."""
+        def f(x: jax.Array, u: jax.Array) -> jax.Array:
+            return params.nominal_A_d @ x
+
+        def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
+            return params.nominal_A_d @ x, params.nominal_A_d
+
+        return FilterModel(f, f_and_F, params.nominal_C, params.nominal_Q_d, params.nominal_R)
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams
@@ -344,6 +357,7 @@ class CarrierMotion(FilteredPlant):
         if self.kind == "kf":
             state = watch_state(state, *kf_update(x0, P0, y, params.nominal_C, params.nominal_R),
                                 params.watch)
+        state = self.finish_reset(state, params)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -400,6 +414,5 @@ class CarrierMotion(FilteredPlant):
                                 params.nominal_Q_d)
             new = watch_state(new, *kf_update(xp, Pp, y, params.nominal_C, params.nominal_R),
                               params.watch)
-            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
-                        estimator_diverged=new.diverged, nis=new.nis)
-        return self.get_obs(new, params), new, reward, terminated, info
+        obs, new, info = self.finish_step(state, new, u, params, info)
+        return obs, new, reward, terminated, info

@@ -80,6 +80,7 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
+    FilterModel,
     PlantState,
     filter_prior,
     watch_limits_of,
@@ -93,7 +94,7 @@ from .kalman import symmetrize
 TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
 #: the observation kinds
-KINDS = ("true", "measurement", "ekf")
+KINDS = ("true", "measurement", "measurement-stack", "ekf")
 #: the Euler loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``):
 #: 1.25x the env-steps/s of no unrolling on a CPU at 2048 envs; 25 compiles slowly and runs
 #: slower (scripts/jax_stepping_speed.py)
@@ -321,6 +322,7 @@ class Orbit(FilteredPlant):
     """
 
     kinds = KINDS
+    estimator = "ekf"
     n_x, n_y = 2, 1
 
     @property
@@ -330,6 +332,21 @@ class Orbit(FilteredPlant):
     @property
     def name(self) -> str:
         return "fir_gym/Orbit-v0"
+
+    def filter_model(self, params: OrbitParams) -> FilterModel:
+        """The EKF's model (:class:`fir_gym.envs.orbit.OrbitEnv`'s ``model``): eq (27)'s
+        interval at the nominal ``mu, thrust_max, euler_dt, substeps``, ``H = [1, 0]``, the
+        nominal ``Q`` and ``R``."""
+        def f(x: jax.Array, u: jax.Array) -> jax.Array:
+            return orbit_plant_interval(x, u[0] * params.nominal_thrust_max, params.nominal_mu,
+                                        params.nominal_euler_dt, params.nominal_substeps)
+
+        def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
+            return orbit_interval(x, u[0] * params.nominal_thrust_max, params.nominal_mu,
+                                  params.nominal_euler_dt, params.nominal_substeps)
+
+        return FilterModel(f, f_and_F, jnp.array([[1.0, 0.0]]), jnp.asarray(params.nominal_Q),
+                           jnp.reshape(jnp.asarray(params.nominal_R, dtype=jnp.float64), (1, 1)))
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[Any, OrbitState]:
@@ -347,6 +364,7 @@ class Orbit(FilteredPlant):
         if self.kind == "ekf":
             state = watch_state(state, *ekf_update(x0, P0, y, params.nominal_R),
                                 watch_limits_of(params))
+        state = self.finish_reset(state, params)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -412,6 +430,5 @@ class Orbit(FilteredPlant):
             Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
             new = watch_state(new, *ekf_update(xp, Pp, y, params.nominal_R),
                               watch_limits_of(params))
-            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
-                        estimator_diverged=new.diverged, nis=new.nis)
-        return self.get_obs(new, params), new, reward, terminated, info
+        obs, new, info = self.finish_step(state, new, u, params, info)
+        return obs, new, reward, terminated, info

@@ -111,6 +111,7 @@ from flax import struct
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
 from ._plant import (
     FilteredPlant,
+    FilterModel,
     PlantState,
     belief_of,
     filter_prior,
@@ -145,7 +146,7 @@ COULOMB_VELOCITY = 0.01
 #: the cap of the bracketed cost (``PendulumSliderEnv.BRACKET_CAP``)
 BRACKET_CAP = 20.0
 #: the observation kinds
-KINDS = ("true", "measurement", "ekf")
+KINDS = ("true", "measurement", "measurement-stack", "ekf")
 #: the physical parameters, in the order of :class:`Physics`
 PHYSICAL = ("m1", "m2", "l", "I_c", "k", "l0", "M0", "mu", "g")
 _TRIU = np.triu_indices(4)
@@ -604,6 +605,8 @@ class PendulumSlider(FilteredPlant):
     """
 
     kinds = KINDS
+    estimator = "ekf"
+    default_horizon = 20
     n_x, n_y = 4, 4
 
     @property
@@ -613,6 +616,18 @@ class PendulumSlider(FilteredPlant):
     @property
     def name(self) -> str:
         return "fir_gym/PendulumSlider-v0"
+
+    def filter_model(self, params: PendulumSliderParams) -> FilterModel:
+        """The EKF's model (the numpy plant's ``model``): the slider's RK4 interval at the
+        nominal physics (:func:`ekf_model`), ``H = I``, the nominal ``Q`` and ``R``."""
+        pf = _physics(params, nominal=True)
+
+        def f(x: jax.Array, u: jax.Array) -> jax.Array:
+            return slider_interval(x, u[0] * params.nominal_force_max, pf,
+                                   params.nominal_friction, params.nominal_frame_skip)
+
+        return FilterModel(f, ekf_model(params), jnp.eye(4), jnp.asarray(params.nominal_Q),
+                           jnp.asarray(params.nominal_R))
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: PendulumSliderParams
@@ -631,6 +646,7 @@ class PendulumSlider(FilteredPlant):
         state = PendulumSliderState.start(x, y, x0, P0)
         if self.kind == "ekf":
             state = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
+        state = self.finish_reset(state, params)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -717,9 +733,8 @@ class PendulumSlider(FilteredPlant):
                 Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
                 belief = ekf_correct(belief_of(state), xp, Pp, y, params)
             new = with_belief(new, belief)
-            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
-                        estimator_diverged=new.diverged, nis=new.nis)
-        return self.get_obs(new, params), new, reward, terminated, info
+        obs, new, info = self.finish_step(state, new, u, params, info)
+        return obs, new, reward, terminated, info
 
 
 def _action(action: Any) -> tuple[jax.Array, jax.Array]:

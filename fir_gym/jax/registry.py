@@ -15,11 +15,11 @@ from typing import Any
 
 @dataclass(frozen=True)
 class JaxPlant:
-    """One plant of the JAX backend: its environment class (built with ``kind``), its params
-    builder (the numpy env's keywords) and its kinds, the estimator kind last."""
+    """One plant of the JAX backend: its environment class (built with ``kind`` and the kind's
+    options), its params builder (the numpy env's keywords) and its kinds."""
 
     env_id: str
-    env_class: Callable[[str], Any]
+    env_class: Any
     params: Callable[..., Any]
     kinds: tuple[str, ...]
 
@@ -50,22 +50,28 @@ def kinds_line() -> str:
     return "; ".join(f"{p.env_id} with kind {', '.join(p.kinds)}" for p in PLANTS.values())
 
 
-def make(env_id: str, kind: str | None = None, **env_kwargs: Any) -> tuple[Any, Any]:
-    """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's estimator
-    kind), the params built from the numpy env's keywords ``env_kwargs``.
+def make(env_id: str, kind: str | None = None, *,
+         kind_kwargs: dict[str, Any] | None = None, **env_kwargs: Any) -> tuple[Any, Any]:
+    """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's own filter),
+    the env built with ``kind_kwargs`` (``observation``, ``horizon``: the environment class's
+    options) and the params from the numpy env's keywords ``env_kwargs``.
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
-            plant's builder refuses (naming it).
+            plant's builder or the environment class refuses (naming it).
     """
     plant = PLANTS.get(env_id)
     if plant is None:
         raise ValueError(f"env_id must be one of {sorted(PLANTS)}; got {env_id!r}")
-    kind = plant.kinds[-1] if kind is None else kind
+    kind = plant.env_class.estimator if kind is None else kind
     if kind not in plant.kinds:
         raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
     try:
         params = plant.params(**env_kwargs)
     except TypeError as error:                       # an unknown keyword
         raise ValueError(f"{env_id}: {error}") from None
-    return plant.env_class(kind), params
+    unknown = sorted(set(kind_kwargs or {}) - {"observation", "horizon"})
+    if unknown:
+        raise ValueError(f"kind_kwargs has unknown option(s) {unknown}; the options are "
+                         "observation and horizon")
+    return plant.env_class(kind, **(kind_kwargs or {})), params

@@ -332,11 +332,12 @@ class SB3LikePPO(PPO):
         return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
 
 
-def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None
-             ) -> tuple[Any, Any]:
-    """``(gymnax env, params)`` of a supported plant and kind."""
+def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None,
+             kind_kwargs: dict[str, Any] | None = None) -> tuple[Any, Any]:
+    """``(gymnax env, params)`` of a supported plant and kind (``kind_kwargs``: the kind's
+    ``horizon``, :func:`fir_gym.jax.make`)."""
     check_supported(env_id, kind)
-    return make(env_id, kind, **(env_kwargs or {}))
+    return make(env_id, kind, kind_kwargs=kind_kwargs, **(env_kwargs or {}))
 
 
 def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:
@@ -461,6 +462,7 @@ class JaxTraining:
     train_seconds: float                      # running the compiled program
     cache: str | None
     train_state: Any = field(default=None, repr=False)   # the vmapped rejax state
+    kind_kwargs: dict[str, Any] = field(default_factory=dict)   # the kind's options
 
     @property
     def per_seed(self) -> list[float]:
@@ -488,11 +490,13 @@ class JaxTraining:
 def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None = None,
           n_envs: int | None = None, algo_kwargs: dict[str, Any] | None = None,
           env_kwargs: dict[str, Any] | None = None, hyperparams: str | None = None,
-          checkpoints: int = 10, curve_episodes: int = 8, episodes: int = 20,
-          eval_seed: int = 10_000, cache: str | Path | bool | None = True) -> JaxTraining:
+          kind_kwargs: dict[str, Any] | None = None, checkpoints: int = 10,
+          curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000,
+          cache: str | Path | bool | None = True) -> JaxTraining:
     """Train PPO on ``env_id`` observing ``kind`` for every seed in one compiled program.
 
-    ``seeds``: a list, or a count (``0..n-1``). ``checkpoints`` evaluations of
+    ``seeds``: a list, or a count (``0..n-1``). ``kind_kwargs``: the kind's options
+    (``horizon``). ``checkpoints`` evaluations of
     ``curve_episodes`` episodes along training make the curves, ``episodes`` at the end the
     final returns (module docstring). ``cache``: ``True`` for :func:`cache_dir`, a folder,
     or ``False``/``None`` for none (what is already on leaves JAX's setting as it is).
@@ -510,7 +514,7 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
         folder = str(enable_compilation_cache(None if cache is True else cache))
     rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
                  hyperparams=hyperparams)
-    env, params = make_env(env_id, kind, env_kwargs)
+    env, params = make_env(env_id, kind, env_kwargs, kind_kwargs)
     algo = make_algorithm(env, params, rec)
     program = jax.jit(jax.vmap(training_program(
         algo, rec, checkpoints=checkpoints, curve_episodes=curve_episodes, episodes=episodes,
@@ -528,7 +532,7 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
         curves=np.asarray(curve).mean(axis=-1).tolist(),
         final_returns=np.asarray(final).tolist(),
         compile_seconds=compiled_at - start, train_seconds=done - compiled_at, cache=folder,
-        train_state=ts)
+        train_state=ts, kind_kwargs=dict(kind_kwargs or {}))
 
 
 def save(result: JaxTraining, out: str | Path) -> Path:

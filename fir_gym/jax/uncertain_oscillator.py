@@ -103,6 +103,7 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
+    FilterModel,
     PlantState,
     filter_prior,
     watch_limits_of,
@@ -119,7 +120,7 @@ PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
 #: the worst per-step cost (``UncertainOscillatorEnv.cost_cap``)
 COST_CAP = 2.25
 #: the observation kinds
-KINDS = ("true", "measurement", "ekf")
+KINDS = ("true", "measurement", "measurement-stack", "ekf")
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 PARAMETERS = ("Q", "R", "dt", "stiffness", "damping_gain", "drive", "u_max")
 #: ``H`` of ``y = x1 + v``
@@ -381,6 +382,7 @@ class UncertainOscillator(FilteredPlant):
     """
 
     kinds = KINDS
+    estimator = "ekf"
     n_x, n_y = 3, 1
 
     @property
@@ -390,6 +392,22 @@ class UncertainOscillator(FilteredPlant):
     @property
     def name(self) -> str:
         return "fir_gym/UncertainOscillator-v0"
+
+    def filter_model(self, params: UncertainOscillatorParams) -> FilterModel:
+        """The EKF's model (the numpy plant's ``model``): the nominal oscillator with δ = 0,
+        ``H = [1, 0, 0]``, ``G Q Gᵀ`` (:func:`model_process_cov`) and the nominal ``R``."""
+        def f(x: jax.Array, u: jax.Array) -> jax.Array:
+            return oscillator_step(x, u, 0.0, params.nominal_stiffness,
+                                   params.nominal_damping_gain, params.nominal_drive,
+                                   params.nominal_u_max, params.nominal_dt, params.uncertainty)
+
+        def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
+            return f(x, u), oscillator_jacobian(x, params.nominal_stiffness,
+                                                params.nominal_damping_gain, params.nominal_dt,
+                                                params.uncertainty)
+
+        return FilterModel(f, f_and_F, jnp.asarray(_H), model_process_cov(params),
+                           jnp.reshape(jnp.asarray(params.nominal_R, dtype=jnp.float64), (1, 1)))
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: UncertainOscillatorParams
@@ -410,6 +428,7 @@ class UncertainOscillator(FilteredPlant):
         state = UncertainOscillatorState.start(x, y, x0, P0)
         if self.kind == "ekf":
             state = ekf_update(state, x0, P0, y, params)
+        state = self.finish_reset(state, params)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -478,6 +497,5 @@ class UncertainOscillator(FilteredPlant):
             xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model_process_cov(params),
                                  f_and_F)
             new = ekf_update(new, xp, Pp, y, params)
-            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
-                        estimator_diverged=new.diverged, nis=new.nis)
-        return self.get_obs(new, params), new, reward, terminated, info
+        obs, new, info = self.finish_step(state, new, u, params, info)
+        return obs, new, reward, terminated, info

@@ -106,6 +106,7 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
+    FilterModel,
     PlantState,
     filter_prior,
     watch_limits_of,
@@ -116,7 +117,7 @@ from ._x64 import require_x64
 from .kalman import ekf_predict, kf_update_innovation
 
 #: the observation kinds
-KINDS = ("true", "measurement", "ekf")
+KINDS = ("true", "measurement", "measurement-stack", "ekf")
 #: the Heun loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``; the
 #: value :mod:`fir_gym.jax.orbit` measured for its Euler loops)
 UNROLL = 10
@@ -457,6 +458,7 @@ class VanDerPol(FilteredPlant):
     """
 
     kinds = KINDS
+    estimator = "ekf"
     n_x, n_y = 2, 1
 
     @property
@@ -466,6 +468,20 @@ class VanDerPol(FilteredPlant):
     @property
     def name(self) -> str:
         return "fir_gym/VanDerPol-v0"
+
+    def filter_model(self, params: VanDerPolParams) -> FilterModel:
+        """The EKF's model (the numpy plant's ``model``): the noise-free Heun interval at the
+        nominal ``ε, u_max, h, substeps`` (:func:`heun_model_interval`), ``H = [1, 0]``, the
+        integrated process noise ``model_Q`` and ``model_R``."""
+        tau_model = params.nominal_h / params.nominal_substeps
+
+        def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
+            return heun_model_interval(x, u[0] * params.nominal_u_max, params.nominal_epsilon,
+                                       tau_model, params.nominal_substeps)
+
+        return FilterModel(lambda x, u: f_and_F(x, u)[0], f_and_F, jnp.array([[1.0, 0.0]]),
+                           jnp.asarray(params.model_Q),
+                           jnp.reshape(jnp.asarray(params.model_R, dtype=jnp.float64), (1, 1)))
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: VanDerPolParams
@@ -486,6 +502,7 @@ class VanDerPol(FilteredPlant):
         if self.kind == "ekf":
             state = watch_state(state, *ekf_correct(x0, P0, y, params),
                                 watch_limits_of(params))
+        state = self.finish_reset(state, params)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -557,6 +574,5 @@ class VanDerPol(FilteredPlant):
                                                        params.nominal_substeps))
             new = watch_state(new, *ekf_correct(xp, Pp, y, params),
                               watch_limits_of(params))
-            info.update(estimate=new.filter_x, estimation_error=x_kept - new.filter_x,
-                        estimator_diverged=new.diverged, nis=new.nis)
-        return self.get_obs(new, params), new, reward, terminated, info
+        obs, new, info = self.finish_step(state, new, u, params, info)
+        return obs, new, reward, terminated, info
