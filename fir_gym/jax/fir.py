@@ -1,4 +1,5 @@
-"""The extended FIR filter (paper 000) as pure JAX steps, for one system.
+"""The extended FIR filter (paper 000) and the linear FIR filter as pure JAX steps, for one
+system.
 
 The JAX twin of :class:`fir_gym.estimators.efir.ExtendedFIRFilter` (the numpy reference)
 as :func:`fir_gym.wrappers.estimator_observation.build_estimator` configures it for a
@@ -47,6 +48,18 @@ and return ``(memory, x, P, nis)``. The watch is the numpy one; the windowed fil
 bound (a component of ``x̂`` beyond ``max_estimate``, which the numpy watch flags while it
 still stores that estimate) is handed to :func:`~fir_gym.jax.kalman.watch` as NaN in ``x``
 and ``P``: the flag is the same, the record keeps the previous estimate instead.
+
+**The linear FIR filter** (:func:`fir_start`, :func:`fir_update`,
+:func:`fir_predict_update`, :class:`FIRMemory`): :class:`fir_gym.estimators.fir.FIRFilter`
+as the envs build it (``estimator="fir"``: no ``startup`` option, no prior on the window) on
+a time-invariant linear model (``f(x, u) = A x + B u``: ``A`` from ``f_and_F``, ``B u =
+f(0, u)``). The numpy filter applies the window's fixed gain (computed once, paper 000
+Theorem 1 by the two-stage path) to a ring buffer of ``[y, u]``; here the same staggered bank
+runs on the data with ``x̄ ← A x̄ + B u`` — the same estimator, computed in another order
+(they agree to ~1e-14 on the models of ``tests/jax/test_fir.py``). Its start-up is the
+numpy filter's: the growing window (the bank's window 0) without a prior, and, before it
+determines the state, the prior propagated open loop (``A x + B u``, ``A P Aᵀ + Q`` from
+``x0, P0``); its covariances are symmetrised as there.
 
 The numpy reference runs with ``numba`` absent (:data:`fir_gym.estimators.compiled.ENABLED`
 false) on its numpy path, whose operations these follow in its order (its compiled twin
@@ -282,3 +295,78 @@ def efir_predict_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.A
     measurement ``y`` and the applied action ``u`` (``_predict_update``):
     ``(memory, x, P, nis)`` as :func:`efir_update`."""
     return _advance(memory, x, P, y, u, model, max_estimate)
+
+
+# ---------------------------------------------------------------------------- the linear FIR
+@struct.dataclass
+class FIRMemory:
+    """What the linear FIR filter keeps beyond its estimate: the bank ``Z`` (``horizon``
+    windows), the number ``k`` of measurements consumed, the prior ``x_open``, ``P_open``
+    propagated open loop through the start-up, and the last step's ``startup`` and
+    ``rank_deficient`` flags."""
+
+    Z: Any
+    k: Any
+    x_open: Any
+    P_open: Any
+    startup: Any
+    rank_deficient: Any
+
+
+def fir_start(x0: jax.Array, P0: jax.Array, horizon: int, model: FilterModel | None = None
+              ) -> FIRMemory:
+    """The linear FIR filter's memory right after construction or ``reset`` with the prior
+    ``N(x0, P0)`` (``horizon`` static; ``model`` unused, the generic filters' signature)."""
+    x0 = jnp.asarray(x0, dtype=jnp.float64)
+    return FIRMemory(Z=bank_start(int(horizon), x0.shape[0]), k=jnp.asarray(0, dtype=jnp.int64),
+                     x_open=x0, P_open=jnp.asarray(P0, dtype=jnp.float64),
+                     startup=jnp.asarray(True), rank_deficient=jnp.asarray(False))
+
+
+def _fir_advance(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                 u: jax.Array | None, model: FilterModel, max_estimate: float
+                 ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """One pass of :meth:`fir_gym.estimators.fir.FIRFilter._advance` for a time-invariant
+    linear model (preceded by its NIS); ``u`` is ``None`` at the reset's update."""
+    L = memory.Z.shape[0]
+    k, Z = memory.k, memory.Z
+    H, R, Q = jnp.asarray(model.H), jnp.asarray(model.R), jnp.asarray(model.Q)
+    x_open, P_open = memory.x_open, memory.P_open
+    start = k < L - 1                                 # the window is not yet full
+    if u is None:
+        x_pred, P_pred = x, P
+    else:
+        x_pred, A = model.f_and_F(x, u)               # A x̂ + B u (linear: A anywhere)
+        P_pred = A @ P @ A.T + Q
+        Bu = model.f(jnp.zeros_like(x), u)            # B u
+        x_open = jnp.where(start, A @ x_open + Bu, x_open)
+        P_open = jnp.where(start, A @ P_open @ A.T + Q, P_open)
+        Z = bank_predict(Z, A, Q, Bu)
+    nis = innovation_nis(P_pred, y - H @ x_pred, H, R)
+    Z = bank_restart(Z, k % L)
+    Z = bank_update(Z, H, R, y)
+    x_new, P_new, regular = bank_estimate(Z, jnp.maximum(0, k - L + 1) % L)
+    ok = regular | ~start                             # a full window: the fixed gain's
+    x_fall = jnp.where(start, x_open, x_pred)
+    P_fall = jnp.where(start, P_open, P_pred)
+    x_new = jnp.where(ok, x_new, x_fall)
+    P_new = symmetrize(jnp.where(ok, P_new, P_fall))
+    grown = ~(jnp.max(jnp.abs(x_new)) <= max_estimate)
+    memory = FIRMemory(Z=Z, k=k + 1, x_open=x_open, P_open=P_open, startup=start,
+                       rank_deficient=~ok)
+    return memory, jnp.where(grown, jnp.nan, x_new), jnp.where(grown, jnp.nan, P_new), nis
+
+
+def fir_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+               model: FilterModel, max_estimate: float = MAX_ESTIMATE
+               ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """The linear FIR filter's first step from the prior with ``y[0]`` (as
+    :func:`efir_update`)."""
+    return _fir_advance(memory, x, P, y, None, model, max_estimate)
+
+
+def fir_predict_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                       u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                       ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """One env step of the linear FIR filter (as :func:`efir_predict_update`)."""
+    return _fir_advance(memory, x, P, y, u, model, max_estimate)

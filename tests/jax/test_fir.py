@@ -1,12 +1,14 @@
-"""fir_gym.jax.fir against the numpy extended FIR filter it mirrors
+"""fir_gym.jax.fir against the numpy FIR filters it mirrors
 (:class:`fir_gym.estimators.efir.ExtendedFIRFilter`, configured as the fir-gym envs build it:
 ``startup="prior"``, ``form="filter"``, ``nominal="open-loop"``), on the same model and the
 same measurements, step by step: the estimate and covariance the divergence watch keeps, the
 NIS, the sticky ``diverged`` flag and the start-up / rank-deficient flags — over hundreds of
 steps (start-up and full windows), on a linear model with an input and ``Q ≠ 0`` (one and
 two channels), on Orbit-v0 (``Q = 0``; the numpy env's own filter in a closed-loop episode,
-horizons 50 and 5, and a far wrong μ that the watch flags), on a model whose window loses
-rank (the fallback), and batched under ``jit`` + ``vmap``."""
+horizons 50 and 5, and a model far wrong about its sensor, which the watch flags), on a
+model whose window loses rank (the fallback), and batched under ``jit`` + ``vmap``; and the
+linear :class:`fir_gym.estimators.fir.FIRFilter` (its fixed gain against the staggered bank)
+on the linear model and in a numpy CarrierMotion-v0 episode."""
 
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import jax.numpy as jnp  # noqa: E402
 import fir_gym  # noqa: E402,F401  (registers the envs)
 from fir_gym.estimators import _consistency, _fir_bank  # noqa: E402
 from fir_gym.estimators.efir import ExtendedFIRFilter  # noqa: E402
+from fir_gym.estimators.fir import FIRFilter  # noqa: E402
 from fir_gym.estimators.model import LinearModel, StateSpaceModel  # noqa: E402
 from fir_gym.jax import fir as jf  # noqa: E402
 from fir_gym.jax import kalman as jk  # noqa: E402
@@ -52,14 +55,22 @@ def run_numpy(est: Any, ys: np.ndarray, us: np.ndarray) -> list[dict[str, Any]]:
     return out
 
 
-def jax_steps(model: FilterModel, limits: jk.WatchLimits) -> tuple[Any, Any]:
+#: the filters' (start, update, predict_update)
+KINDS = {"efir": (jf.efir_start, jf.efir_update, jf.efir_predict_update),
+         "fir": (jf.fir_start, jf.fir_update, jf.fir_predict_update)}
+
+
+def jax_steps(model: FilterModel, limits: jk.WatchLimits, kind: str = "efir"
+              ) -> tuple[Any, Any]:
     """The reset's update and one step, each followed by the watch, jitted."""
+    _, update, predict_update = KINDS[kind]
+
     def first(memory: Any, b: jk.Belief, y: jax.Array) -> tuple[Any, jk.Belief]:
-        memory, x, P, nis = jf.efir_update(memory, b.x, b.P, y, model)
+        memory, x, P, nis = update(memory, b.x, b.P, y, model)
         return memory, jk.watch(b, x, P, nis, limits)
 
     def step(memory: Any, b: jk.Belief, y: jax.Array, u: jax.Array) -> tuple[Any, jk.Belief]:
-        memory, x, P, nis = jf.efir_predict_update(memory, b.x, b.P, y, u, model)
+        memory, x, P, nis = predict_update(memory, b.x, b.P, y, u, model)
         return memory, jk.watch(b, x, P, nis, limits)
 
     return jax.jit(first), jax.jit(step)
@@ -72,10 +83,10 @@ def jax_record(memory: Any, b: jk.Belief) -> dict[str, Any]:
 
 
 def run_jax(model: FilterModel, x0: np.ndarray, P0: np.ndarray, horizon: int, ys: np.ndarray,
-            us: np.ndarray) -> list[dict[str, Any]]:
-    first, step = jax_steps(model, jk.watch_limits(ys.shape[1]))
+            us: np.ndarray, kind: str = "efir") -> list[dict[str, Any]]:
+    first, step = jax_steps(model, jk.watch_limits(ys.shape[1]), kind)
     b = jk.belief(jnp.asarray(x0), jnp.asarray(P0))
-    memory, b = first(jf.efir_start(b.x, b.P, horizon, model), b, jnp.asarray(ys[0]))
+    memory, b = first(KINDS[kind][0](b.x, b.P, horizon, model), b, jnp.asarray(ys[0]))
     out = [jax_record(memory, b)]
     for k in range(1, len(ys)):
         memory, b = step(memory, b, jnp.asarray(ys[k]), jnp.asarray(us[k - 1]))
@@ -105,6 +116,18 @@ def assert_agree(ours: list[dict[str, Any]], ref: list[dict[str, Any]]) -> dict[
 
 
 # ---------------------------------------------------------------------------- models
+def linear_filter_model(ref: LinearModel) -> FilterModel:
+    """The :class:`FilterModel` of a numpy :class:`LinearModel`: ``A x + B u``, ``A``, ``C``,
+    ``G Q Gᵀ``, ``R``."""
+    A, B = jnp.asarray(ref.A), jnp.asarray(ref.B)
+
+    def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
+        return A @ x + B @ u, A
+
+    return FilterModel(lambda x, u: f_and_F(x, u)[0], f_and_F, jnp.asarray(ref.C),
+                       jnp.asarray(ref.GQGT), jnp.asarray(ref.R))
+
+
 def linear_case(p: int) -> tuple[LinearModel, FilterModel]:
     """A damped oscillator with a force input, process noise on both states, ``p`` channels."""
     A = np.array([[1.0, 0.1], [-0.05, 0.98]])
@@ -113,13 +136,7 @@ def linear_case(p: int) -> tuple[LinearModel, FilterModel]:
     Q = np.array([[1e-4, 2e-5], [2e-5, 1e-3]])
     R = np.array([[1e-2]]) if p == 1 else np.array([[1e-2, 2e-3], [2e-3, 4e-2]])
     ref = LinearModel(A=A, B=B, C=C, Q=Q, R=R)
-    Aj, Bj = jnp.asarray(A), jnp.asarray(B)
-
-    def f_and_F(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
-        return Aj @ x + Bj @ u, Aj
-
-    return ref, FilterModel(lambda x, u: f_and_F(x, u)[0], f_and_F, jnp.asarray(C),
-                            jnp.asarray(Q), jnp.asarray(R))
+    return ref, linear_filter_model(ref)
 
 
 def simulate(model: LinearModel | StateSpaceModel, x0: np.ndarray, us: np.ndarray,
@@ -263,16 +280,17 @@ def test_the_regularity_test_is_the_numpy_banks() -> None:
 
 
 # ---------------------------------------------------------------------------- (d) batched
-def test_jit_vmap_over_a_batch_is_the_unbatched_filter() -> None:
+@pytest.mark.parametrize("kind", ["efir", "fir"])
+def test_jit_vmap_over_a_batch_is_the_unbatched_filter(kind: str) -> None:
     ref, model = linear_case(1)
     x0, P0, horizon, n_b, K = np.array([1.0, -0.5]), np.diag([0.2, 0.3]), 8, 4, 60
     rng = np.random.default_rng(11)
     us = rng.uniform(-1.0, 1.0, size=(n_b, K, 1))
     ys = np.stack([simulate(ref, x0, us[i], seed=20 + i) for i in range(n_b)])
     limits = jk.watch_limits(1)
-    first, step = jax_steps(model, limits)
+    first, step = jax_steps(model, limits, kind)
     vfirst, vstep = jax.jit(jax.vmap(first)), jax.jit(jax.vmap(step))
-    start = jax.vmap(lambda x, P: jf.efir_start(x, P, horizon))
+    start = jax.vmap(lambda x, P: KINDS[kind][0](x, P, horizon))
     bx, bP = jnp.broadcast_to(jnp.asarray(x0), (n_b, 2)), jnp.broadcast_to(jnp.asarray(P0),
                                                                           (n_b, 2, 2))
     B = jax.vmap(jk.belief)(bx, bP)
@@ -282,7 +300,7 @@ def test_jit_vmap_over_a_batch_is_the_unbatched_filter() -> None:
         memory, B = vstep(memory, B, jnp.asarray(ys[:, k]), jnp.asarray(us[:, k - 1]))
         batched.append(B)
     for i in range(n_b):
-        single = run_jax(model, x0, P0, horizon, ys[i], us[i])
+        single = run_jax(model, x0, P0, horizon, ys[i], us[i], kind)
         for k, b in enumerate(batched):
             np.testing.assert_allclose(np.asarray(b.x[i]), single[k]["x"], rtol=1e-12,
                                        atol=1e-14)
@@ -291,3 +309,43 @@ def test_jit_vmap_over_a_batch_is_the_unbatched_filter() -> None:
             assert float(b.nis[i]) == pytest.approx(single[k]["nis"], rel=1e-12, abs=1e-14)
             assert bool(b.diverged[i]) == single[k]["diverged"]
     assert memory.Z.shape == (n_b, horizon, 4, 5)
+
+
+# ---------------------------------------------------------------------------- the linear FIR
+@pytest.mark.parametrize("p,horizon", [(1, 20), (2, 7), (1, 50)])
+def test_linear_fir_filter(p: int, horizon: int) -> None:
+    """:class:`fir_gym.estimators.fir.FIRFilter` (time-invariant: a fixed gain over the
+    window, the growing window through start-up, the propagated prior before it determines
+    the state) against the staggered bank, which is the same estimator."""
+    ref, model = linear_case(p)
+    x0, P0 = np.array([1.0, -0.5]), np.diag([0.2, 0.3])
+    rng = np.random.default_rng(p + 10 * horizon)
+    us = rng.uniform(-1.0, 1.0, size=(350, 1))
+    ys = simulate(ref, rng.multivariate_normal(x0, P0), us, seed=p)
+    expected = run_numpy(FIRFilter(ref, horizon=horizon, x0=x0, P0=P0), ys, us)
+    assert_agree(run_jax(model, x0, P0, horizon, ys, us, "fir"), expected)
+    assert expected[0]["rank_deficient"] == (p == 1)                # the prior, then the data
+
+
+def test_carrier_motion_fir_episode() -> None:
+    """The numpy CarrierMotion-v0 env's own ``estimator="fir"`` (horizon 50) over 400 steps."""
+    env = gym.make("fir_gym/CarrierMotion-v0", estimator="fir",
+                   estimator_kwargs={"horizon": 50}, observation="estimate+measurement")
+    wrapper = env
+    while not hasattr(wrapper, "estimator"):
+        wrapper = wrapper.env
+    est = wrapper.estimator
+    assert isinstance(est, FIRFilter) and est.gain == "two-stage" and est.form == "filter"
+    obs, _ = env.reset(seed=4)
+    rng = np.random.default_rng(4)
+    ys, us, expected = [obs["measurement"].copy()], [], [numpy_record(est)]
+    for _ in range(400):
+        a = np.clip(-0.5 * obs["estimate"][0] + 0.3 * rng.normal(), -1.0, 1.0)
+        obs, _, terminated, truncated, info = env.step(np.array([a]))
+        ys.append(obs["measurement"].copy())
+        us.append(np.asarray(info["action"], dtype=np.float64).copy())
+        expected.append(numpy_record(est))
+        assert not (terminated or truncated)
+    x0, P0 = est.prior
+    assert_agree(run_jax(linear_filter_model(env.unwrapped.model), x0, P0, 50, np.array(ys),
+                         np.array(us), "fir"), expected)
