@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     rl = 'Needs the rl extra: pip install torch==2.13.0 && pip install ".[rl]".'
     p = command("train", "train a controller with stable-baselines3 (or JAX: --backend jax)",
                 description="Train a controller with stable-baselines3 and evaluate it. " + rl
-                + " --backend jax trains PPO on fir_gym.jax instead (Orbit-v0 only; the jax "
-                  "extra as well).")
+                + " --backend jax trains PPO on fir_gym.jax instead (every plant, the kinds "
+                  "fir_gym.jax has; the jax extra as well).")
     p.add_argument("--env", required=True,
                    help="environment id, e.g. fir_gym/VanDerPol-v0 (required)")
     p.add_argument("--estimator", "--kind", dest="estimator", default="true",
@@ -188,8 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="an RL Zoo hyperparameter file (default: the shipped one)")
     p.add_argument("--backend", default="sb3", choices=["sb3", "jax"],
                    help="sb3 (default): stable-baselines3 on the numpy plant; jax: rejax's PPO "
-                        "on fir_gym.jax (Orbit-v0 with kind true, measurement or ekf; needs "
-                        'the jax extra: pip install ".[jax]")')
+                        "on fir_gym.jax (true, measurement, measurement-stack and the filters "
+                        "it has: docs/jax.md; needs the jax extra: pip install \".[jax]\")")
     p.add_argument("--seeds", type=positive_int, default=1,
                    help="with --backend jax: train seeds SEED..SEED+N-1 in one compiled "
                         "program (default: 1)")

@@ -198,14 +198,16 @@ def train_jax(args: argparse.Namespace) -> int:
     require("jax", "gymnax", "rejax")                  # a missing extra: its one line
     # fir_gym.jax is imported here only, when asked for (tests/jax/test_jax_boundary.py)
     from .jax import train as jax_train
+    from .training.kinds import kind_options
 
     jax_train.check_supported(args.env, args.estimator, args.observation)
-    refused = {"--algo sac": args.algo != "ppo", "--kind-kwargs": bool(args.kind_kwargs),
+    refused = {"--algo sac": args.algo != "ppo",
                "--checkpoint-freq": bool(args.checkpoint_freq), "--resume": args.resume,
                "--tensorboard": bool(args.tensorboard)}
     if any(refused.values()):
-        raise ValueError("the jax backend trains PPO with the plant's own filter and takes "
-                         "no " + ", ".join(k for k, v in refused.items() if v))
+        raise ValueError("the jax backend trains PPO and takes no "
+                         + ", ".join(k for k, v in refused.items() if v))
+    options = kind_options(args.kind_kwargs, [args.estimator])[args.estimator]
     rec = jax_train.recipe(args.env, steps=args.steps, n_envs=args.n_envs,
                            algo_kwargs=args.algo_kwargs, hyperparams=args.hyperparams)
     checkpoints = max(1, rec.steps // args.eval_freq) if args.eval_freq else 10
@@ -214,7 +216,8 @@ def train_jax(args: argparse.Namespace) -> int:
         result = jax_train.train(args.env, args.estimator, seeds, steps=args.steps,
                                  n_envs=args.n_envs, algo_kwargs=args.algo_kwargs,
                                  env_kwargs=args.env_kwargs, hyperparams=args.hyperparams,
-                                 checkpoints=checkpoints, episodes=args.episodes)
+                                 kind_kwargs=options, checkpoints=checkpoints,
+                                 episodes=args.episodes)
     out = jax_train.save(result, args.out)
     returns = [r for seed in result.final_returns for r in seed]
     import statistics

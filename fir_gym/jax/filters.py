@@ -16,6 +16,7 @@ from typing import Any
 
 import jax
 
+from . import fir
 from ._plant import FilterModel
 
 #: (memory, x, P, nis) after an update or a step
@@ -36,5 +37,7 @@ class FilterKind:
                              Result]
 
 
-#: the generic filter kinds by name
-GENERIC_FILTERS: dict[str, FilterKind] = {}
+#: the generic filter kinds by name (the numpy registry's names)
+GENERIC_FILTERS: dict[str, FilterKind] = {
+    "efir": FilterKind(fir.efir_start, fir.efir_update, fir.efir_predict_update),
+}

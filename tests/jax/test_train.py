@@ -152,8 +152,8 @@ def test_the_recipe_refuses_what_it_cannot_translate(kwargs: dict, match: str) -
 
 # ---------------------------------------------------------------------------- the CLI
 @pytest.mark.parametrize("argv", [
-    ["--env", "fir_gym/VanDerPol-v0", "--kind", "ukf"],
-    ["--env", ORBIT, "--kind", "efir"],
+    ["--env", "fir_gym/VanDerPol-v0", "--kind", "recurrent"],
+    ["--env", ORBIT, "--kind", "fir"],
     ["--env", ORBIT, "--kind", "ekf", "--observation", "estimate+covariance"],
 ])
 def test_the_cli_refuses_what_the_jax_backend_does_not_train(
@@ -165,7 +165,9 @@ def test_the_cli_refuses_what_the_jax_backend_does_not_train(
     assert err.count("\n") == 1 and err.startswith("fir-gym train: error: the jax backend")
     assert "fir_gym/Orbit-v0" in err
     if "--observation" not in argv:
-        assert "with kind true, measurement, ekf" in err
+        from fir_gym.jax.registry import PLANTS
+
+        assert f"with kind {', '.join(PLANTS[ORBIT].kinds)}" in err
     assert not any(tmp_path.iterdir())
 
 

@@ -1,0 +1,108 @@
+"""The generic filter kinds of fir_gym.jax (:mod:`fir_gym.jax.filters`) on every plant,
+against the numpy filter as the numpy env builds it.
+
+The oracle is :class:`fir_gym.wrappers.EstimatorObservation` — the numpy env's own wrapper,
+so the filter is built as ``gym.make(env_id, estimator=kind, estimator_kwargs=...)`` builds
+it (the plant's ``model``, its prior, ``startup="prior"``, the kind's options) — wrapped
+around an env that replays the JAX plant's measurements and applied actions and publishes
+the numpy plant's model and prior. The JAX plant's measurements are the numpy plant's given
+the same noise (the per-plant parity tests), and the plant's ``filter_model`` is its own
+filter's model (tests/jax/test_kinds.py): together, the JAX kind is the numpy env's kind.
+Over a closed-loop episode (random actions, some clipped) the estimate, covariance, NIS
+and the divergence flag agree to 1e-9 relative.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+pytest.importorskip("gymnax")
+
+import gymnasium as gym  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+from gymnasium import spaces  # noqa: E402
+from jax_parity import relative_error  # noqa: E402
+
+import fir_gym  # noqa: E402, F401  (registers the ids)
+from fir_gym.jax import PLANTS, make  # noqa: E402
+from fir_gym.jax.filters import GENERIC_FILTERS  # noqa: E402
+from fir_gym.robustness.plan import PLANTS as PLANS  # noqa: E402
+from fir_gym.wrappers.estimator_observation import EstimatorObservation  # noqa: E402
+
+RTOL = 1e-9
+STEPS = 150
+CASES = [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
+         if kind in GENERIC_FILTERS]
+
+
+class Replay(gym.Env):
+    """Replays recorded measurements, reports the recorded applied actions as
+    ``info["action"]``, and publishes a numpy plant's filter-facing attributes."""
+
+    PUBLISHED = ("model", "initial_state", "initial_state_cov", "default_horizon")
+
+    def __init__(self, plant: Any, ys: np.ndarray, applied: np.ndarray) -> None:
+        self.ys, self.applied, self.k = ys, applied, 0
+        for name in self.PUBLISHED:
+            setattr(self, name, getattr(plant, name))
+        self.observation_space = spaces.Box(-np.inf, np.inf, ys.shape[1:], np.float64)
+        self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
+        self.k = 0
+        return self.ys[0], {}
+
+    def step(self, action: Any) -> Any:
+        self.k += 1
+        return self.ys[self.k], 0.0, False, False, {"action": self.applied[self.k - 1]}
+
+
+def _jax_rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
+    keys = jax.random.split(jax.random.key(seed), len(actions) + 1)
+    _, state = jax.jit(env.reset_env)(keys[0], params)
+    step = jax.jit(env.step_env)
+    states, infos = [state], [None]
+    for key, a in zip(keys[1:], actions, strict=True):
+        _, state, _, _, info = step(key, state, jnp.asarray(a), params)
+        states.append(state)
+        infos.append(info)
+        if bool(state.terminated):
+            break
+    return list(zip(states, infos, strict=True))
+
+
+@pytest.mark.parametrize("env_id,kind", CASES)
+def test_the_kind_is_the_numpy_envs_filter(env_id: str, kind: str) -> None:
+    plan = PLANS[env_id]
+    options = dict(plan.estimator_kwargs.get(kind, {}))
+    env, params = make(env_id, kind, kind_kwargs=options, **plan.env_kwargs)
+    rng = np.random.default_rng(17)
+    actions = rng.uniform(-1.2, 1.2, (STEPS, 1))
+    run = _jax_rollout(env, params, actions, seed=23)
+    assert len(run) > STEPS // 2, "the episode ended too early to compare"
+    ys = np.array([np.asarray(s.y) for s, _ in run])
+    applied = np.array([np.asarray(i["action"]) for _, i in run[1:]])
+    with_plant = gym.make(env_id, **plan.env_kwargs)
+    numpy_env = EstimatorObservation(Replay(with_plant.unwrapped, ys, applied), kind, **options)
+    with_plant.close()
+    estimate, _ = numpy_env.reset()
+    worst = {"x": 0.0, "P": 0.0, "nis": 0.0}
+    for k, (state, _) in enumerate(run):
+        if k:
+            estimate = numpy_env.step(applied[k - 1])[0]
+        est = numpy_env.estimator
+        assert bool(state.diverged) == bool(est.diverged), f"step {k}"
+        worst["x"] = max(worst["x"], relative_error(np.asarray(state.filter_x), estimate))
+        worst["P"] = max(worst["P"], relative_error(np.asarray(state.filter_P), est.P))
+        nis = float(est.last_info.get("nis", np.nan))
+        got = float(state.nis)
+        if np.isnan(nis):
+            assert np.isnan(got), f"step {k}"
+        else:
+            worst["nis"] = max(worst["nis"], abs(got - nis) / (1.0 + abs(nis)))
+    print(env_id, kind, worst)
+    assert max(worst.values()) < RTOL, worst
