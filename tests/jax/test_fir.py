@@ -218,6 +218,19 @@ def test_orbit_closed_loop_episode(horizon: int) -> None:
     assert not expected[-1]["diverged"]
 
 
+def test_orbit_plant_filter_model() -> None:
+    """The JAX plant's own model (:meth:`fir_gym.jax.orbit.Orbit.filter_model` at the default
+    params), which the generic filter kinds run on, in place of the one built here."""
+    from fir_gym.jax import orbit as jorbit
+
+    env = jorbit.Orbit("ekf")
+    if not hasattr(env, "filter_model"):
+        pytest.skip("this fir_gym.jax has no filter_model")
+    est, ys, us, expected = orbit_episode(50, 200, seed=8)
+    x0, P0 = est.prior
+    assert_agree(run_jax(env.filter_model(env.default_params), x0, P0, 50, ys, us), expected)
+
+
 def test_orbit_with_a_far_wrong_model_is_flagged_at_the_same_step() -> None:
     """A model that believes the sensor 10⁴ times better than it is (and a wrong μ): the NIS
     runs high from the first full windows and the watch flags it."""
