@@ -78,7 +78,10 @@ def with_belief(state: Any, b: Belief) -> Any:
 
 
 def watch_limits_of(params: Any) -> WatchLimits:
-    """The divergence watch's limits held in a plant's params."""
+    """The divergence watch's limits held in a plant's params: their ``watch`` record, or
+    their ``max_covariance_trace``, ``nis_threshold`` and ``nis_patience`` fields."""
+    if isinstance(getattr(params, "watch", None), WatchLimits):
+        return params.watch
     return WatchLimits(params.max_covariance_trace, params.nis_threshold, params.nis_patience)
 
 
@@ -100,12 +103,14 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     ``estimate+covariance`` gives the upper triangle of ``P`` row by row) and the spaces;
     one action in ``[-1, 1]``.
 
-    ``horizon`` is the window of ``"measurement-stack"`` and of the windowed filters
-    (static: it sizes the state), :attr:`default_horizon` if not given — the numpy plant's
-    ``default_horizon``. A subclass sets :attr:`kinds`, :attr:`estimator`, :attr:`n_x`,
-    :attr:`n_y` (and :attr:`default_horizon`), implements :meth:`filter_model`, and ends its
-    reset with :meth:`finish_reset` and its step with :meth:`finish_step`; its state has
-    ``x``, ``y``, ``terminated``, the filter fields and ``memory``.
+    ``options`` are the kind's (static): ``horizon``, the window of ``"measurement-stack"``
+    and of the windowed filters (it sizes the state; :attr:`default_horizon`, the numpy
+    plant's, if not given), and a generic filter's options
+    (:attr:`fir_gym.jax.filters.FilterKind.options`). A subclass sets :attr:`kinds`,
+    :attr:`estimator`, :attr:`n_x`, :attr:`n_y` (and :attr:`default_horizon`), implements
+    :meth:`filter_model`, and ends its reset with :meth:`finish_reset` and its step with
+    :meth:`finish_step`; its state has ``x``, ``y``, ``terminated``, the filter fields and
+    ``memory``.
     """
 
     kinds: ClassVar[tuple[str, ...]]
@@ -115,7 +120,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     default_horizon: ClassVar[int] = 10
 
     def __init__(self, kind: str | None = None, observation: str = "estimate",
-                 horizon: int | None = None) -> None:
+                 **options: Any) -> None:
+        from .filters import GENERIC_FILTERS
+
         super().__init__()
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
@@ -126,13 +133,29 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             raise ValueError(f"observation must be one of {OBSERVATIONS} for the filter kinds "
                              f"{filters} (and is not an option of the others); got "
                              f"{observation!r} for {kind!r}")
-        if horizon is None:
-            horizon = self.default_horizon
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) \
-                or horizon < 1:
-            raise ValueError(f"horizon must be a positive integer; got {horizon!r}")
+        accepted = (GENERIC_FILTERS[kind].options if kind in GENERIC_FILTERS
+                    else {"horizon": None} if kind == "measurement-stack" else {})
+        unknown = sorted(set(options) - set(accepted))
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown} for kind {kind!r}; its options are "
+                             f"{sorted(accepted) or 'none'}")
+        options = {**accepted, **options}
+        if "horizon" in options:
+            horizon = options["horizon"]
+            horizon = self.default_horizon if horizon is None else horizon
+            if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) \
+                    or horizon < 1:
+                raise ValueError(f"horizon must be a positive integer; got {horizon!r}")
+            options["horizon"] = int(horizon)
+        if kind in GENERIC_FILTERS:
+            options = GENERIC_FILTERS[kind].check(self.n_x, options)
         require_x64()
-        self.kind, self.observation, self.horizon = kind, observation, int(horizon)
+        self.kind, self.observation, self.options = kind, observation, options
+
+    @property
+    def horizon(self) -> int | None:
+        """The window of ``"measurement-stack"`` and of the windowed filters (else None)."""
+        return self.options.get("horizon")
 
     @property
     def filter_kinds(self) -> tuple[str, ...]:
@@ -176,7 +199,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         if self.kind == "measurement":
             return box(self.n_y)
         if self.kind == "measurement-stack":
-            return box(self.horizon * (self.n_y + 1))
+            return box(self.options["horizon"] * (self.n_y + 1))
         if self.observation == "estimate+covariance":
             return spaces.Dict({"estimate": box(n), "covariance": box(n * (n + 1) // 2)})
         if self.observation == "estimate+measurement":
@@ -195,13 +218,12 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         from .measurement_stack import stack_start
 
         if self.kind == "measurement-stack":
-            return state.replace(memory=stack_start(state.y, self.horizon))
+            return state.replace(memory=stack_start(state.y, self.options["horizon"]))
         if self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
-            model = self.filter_model(params)
-            memory = kind.start(state.filter_x, state.filter_P, self.horizon, model)
+            memory = kind.start(state.filter_x, state.filter_P, self.options)
             memory, x, P, nis = kind.update(memory, state.filter_x, state.filter_P, state.y,
-                                            model)
+                                            self.filter_model(params), self.options)
             state = watch_state(state.replace(memory=memory), x, P, nis,
                                 watch_limits_of(params))
         return state
@@ -221,7 +243,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         elif self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
             memory, x, P, nis = kind.predict_update(old.memory, old.filter_x, old.filter_P,
-                                                    new.y, u, self.filter_model(params))
+                                                    new.y, u, self.filter_model(params),
+                                                    self.options)
             new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params))
         if self.kind in self.filter_kinds:
             info.update(estimate=new.filter_x, estimation_error=new.x - new.filter_x,

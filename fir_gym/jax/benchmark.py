@@ -32,8 +32,8 @@ from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
 from .registry import PLANTS as JAX_PLANTS
 from .train import save, train
 
-#: the benchmark's learned kinds the JAX backend trains (the filter: the plant's own)
-JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf")
+#: the benchmark's learned kinds the JAX backend trains (every plant has a subset: its kinds)
+JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf", "ukf", "efir", "fir")
 
 
 def benchmark_plan(*, quick: bool = False, seeds: int | None = None,

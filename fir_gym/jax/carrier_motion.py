@@ -117,7 +117,7 @@ PAPER_NOISE_INPUT = (0.6, -0.036)
 #: the numpy plant's worst per-step cost (``CarrierMotionEnv.cost_cap``)
 COST_CAP = 100.0
 #: the observation kinds (the estimator kind last)
-KINDS = ("true", "measurement", "measurement-stack", "kf")
+KINDS = ("true", "measurement", "measurement-stack", "kf", "ukf", "fir")
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 MODEL_PARAMETERS = ("sample_period", "q", "v", "delta22", "delta_c", "a21", "a22",
                     "noise_input")

@@ -4,19 +4,27 @@
 A plant's own filter (``"ekf"``, ``"kf"``) runs inside the plant's step, where it can share
 the plant's integration loop; the kinds here run after it
 (:meth:`~fir_gym.jax._plant.FilteredPlant.finish_step`) on the model alone, each as a
-:class:`FilterKind`: the memory it keeps beyond the mean and covariance (a pytree in the env
-state's ``memory``), its update at a reset and its step.
+:class:`FilterKind` — its options (the numpy filter's keywords the JAX twin supports, all
+static), the memory it keeps beyond the mean and covariance (a pytree in the env state's
+``memory``), its update at a reset and its step:
+
+* ``"ukf"`` — :mod:`fir_gym.jax.unscented` (:class:`~fir_gym.estimators.unscented.
+  UnscentedKalmanFilter`; options ``alpha``, ``beta``, ``kappa``);
+* ``"efir"`` — :mod:`fir_gym.jax.fir` (:class:`~fir_gym.estimators.efir.ExtendedFIRFilter`
+  as the env builds it; option ``horizon``);
+* ``"fir"`` — :mod:`fir_gym.jax.fir` (:class:`~fir_gym.estimators.fir.FIRFilter`, linear
+  plants; option ``horizon``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import jax
 
-from . import fir
+from . import fir, unscented
 from ._plant import FilterModel
 
 #: (memory, x, P, nis) after an update or a step
@@ -25,19 +33,65 @@ Result = tuple[Any, jax.Array, jax.Array, jax.Array]
 
 @dataclass(frozen=True)
 class FilterKind:
-    """One generic filter: ``start(x0, P0, horizon, model) -> memory`` (after the prior is
-    set, before the first measurement), ``update(memory, x, P, y, model)`` (the reset's
-    update with ``y[0]``) and ``predict_update(memory, x, P, y, u, model)`` (one env step
-    under the applied action ``u``), each returning ``(memory, x, P, nis)`` with NaN where
-    the numpy filter fails (the divergence watch then keeps the last finite estimate)."""
+    """One generic filter. ``options``: the option names and their defaults (``None``
+    for ``horizon``: the plant's ``default_horizon``). ``start(x0, P0, options)`` is the
+    memory after the prior is set, before the first measurement; ``update(memory, x, P,
+    y, model, options)`` the reset's update with ``y[0]``; ``predict_update(memory, x, P, y,
+    u, model, options)`` one env step under the applied action ``u``. Each returns
+    ``(memory, x, P, nis)`` with NaN where the numpy filter fails (the divergence watch
+    then keeps the last finite estimate)."""
 
-    start: Callable[[jax.Array, jax.Array, int, FilterModel], Any]
-    update: Callable[[Any, jax.Array, jax.Array, jax.Array, FilterModel], Result]
-    predict_update: Callable[[Any, jax.Array, jax.Array, jax.Array, jax.Array, FilterModel],
-                             Result]
+    options: Mapping[str, Any]
+    start: Callable[[jax.Array, jax.Array, Mapping[str, Any]], Any]
+    update: Callable[[Any, jax.Array, jax.Array, jax.Array, FilterModel, Mapping[str, Any]],
+                     Result]
+    predict_update: Callable[[Any, jax.Array, jax.Array, jax.Array, jax.Array, FilterModel,
+                              Mapping[str, Any]], Result]
 
+    def check(self, n_x: int, options: Mapping[str, Any]) -> dict[str, Any]:
+        """The options with defaults filled in; ValueError naming an unknown or bad one."""
+        unknown = sorted(set(options) - set(self.options))
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown}; the options of this kind are "
+                             f"{sorted(self.options) or 'none'}")
+        full = {**self.options, **options}
+        if "alpha" in full:
+            unscented.merwe_weights(n_x, float(full["alpha"]), float(full["beta"]),
+                                    float(full["kappa"]))
+        return full
+
+
+def _weights(x: jax.Array, options: Mapping[str, Any]) -> unscented.SigmaWeights:
+    return unscented.merwe_weights(x.shape[-1], float(options["alpha"]),
+                                   float(options["beta"]), float(options["kappa"]))
+
+
+def _ukf_update(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, model: FilterModel,
+                options: Mapping[str, Any]) -> Result:
+    return (memory, *unscented.ukf_update(x, P, y, model, _weights(x, options)))
+
+
+def _ukf_step(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array,
+              model: FilterModel, options: Mapping[str, Any]) -> Result:
+    return (memory, *unscented.ukf_predict_update(x, P, y, u, model, _weights(x, options)))
+
+
+UKF = FilterKind(
+    options={"alpha": 1e-3, "beta": 2.0, "kappa": 0.0},
+    start=lambda x0, P0, options: (),
+    update=_ukf_update, predict_update=_ukf_step)
+EFIR = FilterKind(
+    options={"horizon": None},
+    start=lambda x0, P0, options: fir.efir_start(x0, P0, options["horizon"]),
+    update=lambda memory, x, P, y, model, options: fir.efir_update(memory, x, P, y, model),
+    predict_update=lambda memory, x, P, y, u, model, options: fir.efir_predict_update(
+        memory, x, P, y, u, model))
+FIR = FilterKind(
+    options={"horizon": None},
+    start=lambda x0, P0, options: fir.fir_start(x0, P0, options["horizon"]),
+    update=lambda memory, x, P, y, model, options: fir.fir_update(memory, x, P, y, model),
+    predict_update=lambda memory, x, P, y, u, model, options: fir.fir_predict_update(
+        memory, x, P, y, u, model))
 
 #: the generic filter kinds by name (the numpy registry's names)
-GENERIC_FILTERS: dict[str, FilterKind] = {
-    "efir": FilterKind(fir.efir_start, fir.efir_update, fir.efir_predict_update),
-}
+GENERIC_FILTERS: dict[str, FilterKind] = {"ukf": UKF, "efir": EFIR, "fir": FIR}

@@ -94,7 +94,7 @@ from .kalman import symmetrize
 TRUE_MU = 19.92244165
 NOMINAL_MU = 19.91
 #: the observation kinds
-KINDS = ("true", "measurement", "measurement-stack", "ekf", "efir")
+KINDS = ("true", "measurement", "measurement-stack", "ekf", "ukf", "efir")
 #: the Euler loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``):
 #: 1.25x the env-steps/s of no unrolling on a CPU at 2048 envs; 25 compiles slowly and runs
 #: slower (scripts/jax_stepping_speed.py)

@@ -146,7 +146,7 @@ COULOMB_VELOCITY = 0.01
 #: the cap of the bracketed cost (``PendulumSliderEnv.BRACKET_CAP``)
 BRACKET_CAP = 20.0
 #: the observation kinds
-KINDS = ("true", "measurement", "measurement-stack", "ekf", "efir")
+KINDS = ("true", "measurement", "measurement-stack", "ekf", "ukf", "efir")
 #: the physical parameters, in the order of :class:`Physics`
 PHYSICAL = ("m1", "m2", "l", "I_c", "k", "l0", "M0", "mu", "g")
 _TRIU = np.triu_indices(4)

@@ -53,8 +53,9 @@ def kinds_line() -> str:
 def make(env_id: str, kind: str | None = None, *,
          kind_kwargs: dict[str, Any] | None = None, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's own filter),
-    the env built with ``kind_kwargs`` (``observation``, ``horizon``: the environment class's
-    options) and the params from the numpy env's keywords ``env_kwargs``.
+    the env built with ``kind_kwargs`` (``observation`` and the kind's options, e.g.
+    ``horizon``: :class:`fir_gym.jax._plant.FilteredPlant`) and the params from the numpy
+    env's keywords ``env_kwargs``.
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
@@ -70,8 +71,8 @@ def make(env_id: str, kind: str | None = None, *,
         params = plant.params(**env_kwargs)
     except TypeError as error:                       # an unknown keyword
         raise ValueError(f"{env_id}: {error}") from None
-    unknown = sorted(set(kind_kwargs or {}) - {"observation", "horizon"})
-    if unknown:
-        raise ValueError(f"kind_kwargs has unknown option(s) {unknown}; the options are "
-                         "observation and horizon")
-    return plant.env_class(kind, **(kind_kwargs or {})), params
+    try:
+        env = plant.env_class(kind, **(kind_kwargs or {}))
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{env_id} kind {kind}: kind_kwargs: {error}") from None
+    return env, params

@@ -120,7 +120,7 @@ PAPER_DELTA_SCHEDULE = ((350, 400, 0.15),)
 #: the worst per-step cost (``UncertainOscillatorEnv.cost_cap``)
 COST_CAP = 2.25
 #: the observation kinds
-KINDS = ("true", "measurement", "measurement-stack", "ekf", "efir")
+KINDS = ("true", "measurement", "measurement-stack", "ekf", "ukf", "efir")
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 PARAMETERS = ("Q", "R", "dt", "stiffness", "damping_gain", "drive", "u_max")
 #: ``H`` of ``y = x1 + v``

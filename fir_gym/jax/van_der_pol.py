@@ -117,7 +117,7 @@ from ._x64 import require_x64
 from .kalman import ekf_predict, kf_update_innovation
 
 #: the observation kinds
-KINDS = ("true", "measurement", "measurement-stack", "ekf", "efir")
+KINDS = ("true", "measurement", "measurement-stack", "ekf", "ukf", "efir")
 #: the Heun loops are unrolled by this factor (:func:`jax.lax.fori_loop`'s ``unroll``; the
 #: value :mod:`fir_gym.jax.orbit` measured for its Euler loops)
 UNROLL = 10

@@ -8,8 +8,14 @@ around an env that replays the JAX plant's measurements and applied actions and 
 the numpy plant's model and prior. The JAX plant's measurements are the numpy plant's given
 the same noise (the per-plant parity tests), and the plant's ``filter_model`` is its own
 filter's model (tests/jax/test_kinds.py): together, the JAX kind is the numpy env's kind.
-Over a closed-loop episode (random actions, some clipped) the estimate, covariance, NIS
-and the divergence flag agree to 1e-9 relative.
+Over a closed-loop episode (random actions, some clipped) the estimate and covariance agree
+to 1e-9 of their largest entry, the NIS to 1e-9 (1 + NIS), the divergence flag exactly.
+
+The UKF is compared at ``alpha = 1, kappa = 1`` (options both envs take): at its default
+``alpha = 1e-3`` the weights are ~1/alpha² in size and of mixed sign, so the one-ulp
+differences of XLA's fused multiply-adds in ``f`` grow to ~1e-8 in the estimate — the
+spread the numpy filter's own compiled twin shows against it (docs/jax.md#round-off;
+tests/jax/test_unscented.py checks the default alpha with fusing turned off).
 """
 
 from __future__ import annotations
@@ -25,7 +31,6 @@ pytest.importorskip("gymnax")
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from gymnasium import spaces  # noqa: E402
-from jax_parity import relative_error  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
@@ -35,8 +40,16 @@ from fir_gym.wrappers.estimator_observation import EstimatorObservation  # noqa:
 
 RTOL = 1e-9
 STEPS = 150
+#: options both envs get, per kind (the module docstring says why the UKF's)
+TEST_OPTIONS = {"ukf": {"alpha": 1.0, "kappa": 1.0}}
 CASES = [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
          if kind in GENERIC_FILTERS]
+
+
+def normwise(got: np.ndarray, want: np.ndarray) -> float:
+    """``max |got − want| / max |want|`` (a covariance's off-diagonal entries may be exact
+    zeros in one filter and round-off in the other)."""
+    return float(np.max(np.abs(got - want)) / max(float(np.max(np.abs(want))), 1e-300))
 
 
 class Replay(gym.Env):
@@ -78,7 +91,7 @@ def _jax_rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[
 @pytest.mark.parametrize("env_id,kind", CASES)
 def test_the_kind_is_the_numpy_envs_filter(env_id: str, kind: str) -> None:
     plan = PLANS[env_id]
-    options = dict(plan.estimator_kwargs.get(kind, {}))
+    options = {**plan.estimator_kwargs.get(kind, {}), **TEST_OPTIONS.get(kind, {})}
     env, params = make(env_id, kind, kind_kwargs=options, **plan.env_kwargs)
     rng = np.random.default_rng(17)
     actions = rng.uniform(-1.2, 1.2, (STEPS, 1))
@@ -96,8 +109,8 @@ def test_the_kind_is_the_numpy_envs_filter(env_id: str, kind: str) -> None:
             estimate = numpy_env.step(applied[k - 1])[0]
         est = numpy_env.estimator
         assert bool(state.diverged) == bool(est.diverged), f"step {k}"
-        worst["x"] = max(worst["x"], relative_error(np.asarray(state.filter_x), estimate))
-        worst["P"] = max(worst["P"], relative_error(np.asarray(state.filter_P), est.P))
+        worst["x"] = max(worst["x"], normwise(np.asarray(state.filter_x), estimate))
+        worst["P"] = max(worst["P"], normwise(np.asarray(state.filter_P), est.P))
         nis = float(est.last_info.get("nis", np.nan))
         got = float(state.nis)
         if np.isnan(nis):

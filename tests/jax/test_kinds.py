@@ -93,8 +93,12 @@ def test_the_stack_horizon_is_an_option(env_id: str) -> None:
     for bad in (0, -2, 2.5, True, "3"):
         with pytest.raises(ValueError, match="horizon"):
             make(env_id, "measurement-stack", kind_kwargs={"horizon": bad})
-    with pytest.raises(ValueError, match="kind_kwargs"):
+    with pytest.raises(ValueError, match=r"kind_kwargs.*window"):
         make(env_id, "measurement-stack", kind_kwargs={"window": 3})
+    with pytest.raises(ValueError, match="alpha"):
+        make(env_id, "ukf", kind_kwargs={"alpha": -1.0})
+    with pytest.raises(ValueError, match="horizon"):
+        make(env_id, "ukf", kind_kwargs={"horizon": 3})
 
 
 @pytest.mark.parametrize("env_id", list(PLANTS))
