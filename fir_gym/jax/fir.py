@@ -63,8 +63,11 @@ determines the state, the prior propagated open loop (``A x + B u``, ``A P Aᵀ 
 
 The numpy reference runs with ``numba`` absent (:data:`fir_gym.estimators.compiled.ENABLED`
 false) on its numpy path, whose operations these follow in its order (its compiled twin
-agrees with it to round-off). Every function is pure and shape-static: ``jit``- and
-``vmap``-able.
+agrees with it to round-off), except that a ``2 × 2`` information matrix is inverted, and its
+determinant and smallest eigenvalue taken, in closed form rather than by LAPACK (under
+``vmap`` on a CPU the batched LAPACK calls cost as much as the rest of a step; the results
+agree to round-off, the regularity decisions exactly on the tests' cases). Every function
+is pure and shape-static: ``jit``- and ``vmap``-able.
 """
 
 from __future__ import annotations
@@ -148,6 +151,32 @@ def bank_update(Z: jax.Array, C: jax.Array, R: jax.Array, y: jax.Array) -> jax.A
     return Z
 
 
+def _det(M: jax.Array) -> jax.Array:
+    """``det M``: in closed form for ``2 × 2`` (the batched LAPACK calls cost more than the
+    rest of a step there), else by LU (:func:`jax.numpy.linalg.det`)."""
+    if M.shape[0] == 2:
+        return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    return jnp.linalg.det(M)
+
+
+def _inv(M: jax.Array) -> jax.Array:
+    """``M⁻¹``: the adjugate over the determinant for ``2 × 2`` (inf/NaN where singular, as
+    the reference's LAPACK inverse raises or overflows), else by LU."""
+    if M.shape[0] == 2:
+        adjugate = jnp.array([[M[1, 1], -M[0, 1]], [-M[1, 0], M[0, 0]]])
+        return adjugate / _det(M)
+    return jnp.linalg.inv(M)
+
+
+def _smallest_eigenvalue(S: jax.Array) -> jax.Array:
+    """``λ_min`` of the symmetric matrix whose lower triangle is ``S``'s
+    (:func:`numpy.linalg.eigvalsh`): ``(a + d)/2 − √(((a − d)/2)² + c²)`` for ``2 × 2``."""
+    if S.shape[0] == 2:
+        a, c, d = S[0, 0], S[1, 0], S[1, 1]
+        return 0.5 * (a + d) - jnp.sqrt((0.5 * (a - d)) ** 2 + c * c)
+    return jnp.linalg.eigvalsh(S, symmetrize_input=False)[0]
+
+
 def information_is_regular(F: jax.Array) -> jax.Array:
     """Whether the information matrix ``F`` is numerically invertible: the tests of
     :func:`fir_gym.estimators._fir_bank.spd_inverse` for one system (LAPACK path), in its
@@ -155,15 +184,15 @@ def information_is_regular(F: jax.Array) -> jax.Array:
     n^(n−1)``, else ``λ_min(Fs) > RANK_RTOL``, ``Fs = D^(-1/2) F D^(-1/2)`` the
     unit-diagonal version (:func:`fir_gym.estimators._fir_bank.information_is_regular`)."""
     n = F.shape[0]
-    Fi = jnp.linalg.inv(F)
+    Fi = _inv(F)
     d = jnp.diagonal(F)
     frobenius = d @ (Fi * Fi) @ d < RANK_RTOL ** -2
     s = jnp.sqrt(jnp.abs(d))
     s = jnp.where(s > 0, s, 1.0)
     Fs = F / (s[:, None] * s[None, :])
-    by_det = jnp.linalg.det(Fs) > RANK_RTOL * n ** (n - 1)
+    by_det = _det(Fs) > RANK_RTOL * n ** (n - 1)
     finite = jnp.all(jnp.isfinite(Fs))
-    by_eig = finite & (jnp.linalg.eigvalsh(jnp.where(finite, Fs, 0.0))[0] > RANK_RTOL)
+    by_eig = finite & (_smallest_eigenvalue(jnp.where(finite, Fs, 0.0)) > RANK_RTOL)
     return frobenius | by_det | by_eig
 
 
@@ -178,9 +207,10 @@ def bank_estimate(Z: jax.Array, w: jax.Array, prior: jax.Array | None = None
     if prior is None:
         F = -Zs[n:, n:2 * n]
         regular = information_is_regular(F)
-        V = jnp.linalg.inv(jnp.where(regular, F, jnp.eye(n)))
+        V = _inv(jnp.where(regular, F, jnp.eye(n)))
     else:
-        V = jnp.linalg.solve(jnp.eye(n) - prior @ Zs[n:, n:2 * n], prior)
+        M = jnp.eye(n) - prior @ Zs[n:, n:2 * n]
+        V = _inv(M) @ prior if n == 2 else jnp.linalg.solve(M, prior)
         regular = jnp.asarray(True)
     T = Zs[:n, n:2 * n]
     TV = T @ V
