@@ -61,6 +61,12 @@ numpy filter's: the growing window (the bank's window 0) without a prior, and, b
 determines the state, the prior propagated open loop (``A x + B u``, ``A P Aᵀ + Q`` from
 ``x0, P0``); its covariances are symmetrised as there.
 
+**Not here** (options the envs do not use): missing or gated measurements, restarts of
+some systems of a batch, ``form="predictor"``, ``nominal="reanchor"``, ``startup="diffuse"``
+for the EFIR, a time-varying model or a prior on the window for the FIR; nor the numpy
+constructors' host-side check that the horizon reaches the observability index (a JAX
+filter with too short a window just falls back every step).
+
 The numpy reference runs with ``numba`` absent (:data:`fir_gym.estimators.compiled.ENABLED`
 false) on its numpy path, whose operations these follow in its order (its compiled twin
 agrees with it to round-off), except that a ``2 × 2`` information matrix is inverted, and its
