@@ -3,18 +3,19 @@ that the JAX backend has, every seed of a (plant, kind) in one compiled program.
 
 The plan is the SB3 benchmark's (:data:`fir_gym.training.benchmark.PLANTS`: the plants'
 episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` seeds,
-:data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes), restricted to the plants
-of :data:`fir_gym.jax.registry.PLANTS` and to the kinds both have (``true``,
-``measurement`` and the plant's own filter, ``ekf`` or ``kf``); PPO with the shipped recipe
-(:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds' mean returns and
-its 95 % interval from the same bootstrap as the SB3 benchmark's
-(:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), the compile and
-training times and the training rate. Given an SB3 benchmark (``--compare-with``: its
+:data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes, the kinds' options such as
+the windowed filters' horizon), its kinds per plant those of the robustness benchmark's
+learned grid on the nominal plant (:data:`fir_gym.robustness.plan.PLAIN_KINDS` and the
+plant's ``learned_estimators``: the rows of README.md's benchmark table) that the plant has
+in :data:`fir_gym.jax.registry.PLANTS` — all but ``recurrent`` (and ``ufir``); PPO with the
+shipped recipe (:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds'
+mean returns and its 95 % interval from the same bootstrap as the SB3 benchmark's
+(:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), on the JAX env's
+own episode draws and on the numpy env's SB3 episodes (:func:`numpy_returns`), the compile
+and training times and the training rate. Given an SB3 benchmark (``--compare-with``: its
 folder, or a Markdown file of its tables such as its ``BENCHMARK.md`` or README.md's
 benchmark section), each row stands beside the SB3 row of the same plant and kind, with the
-verdict: is the JAX IQM inside the SB3 interval? The two backends'
-evaluation episodes are drawn from different generators (the same distribution, not the
-same draws).
+verdict: is the numpy-env IQM inside the SB3 interval?
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from fir_gym.robustness.plan import EVAL_SEED
+from fir_gym.robustness.plan import EVAL_SEED, PLAIN_KINDS
+from fir_gym.robustness.plan import PLANTS as ROBUSTNESS_PLANTS
 from fir_gym.tables import format_table
 from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS
 from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
@@ -52,7 +54,8 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     jobs = []
     for env_id in chosen:
         spec = PLANTS[env_id]
-        have = [k for k in JAX_PLANTS[env_id].kinds if k in JAX_KINDS]
+        planned = (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators)
+        have = [k for k in planned if k in JAX_PLANTS[env_id].kinds and k in JAX_KINDS]
         for kind in have if kinds is None else [k for k in kinds if k in have]:
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],

@@ -14,6 +14,8 @@ pytest.importorskip("gymnax")
 pytest.importorskip("rejax")
 
 from fir_gym.jax import benchmark
+from fir_gym.robustness.plan import PLAIN_KINDS
+from fir_gym.robustness.plan import PLANTS as PLANS
 from fir_gym.training import benchmark as sb3_benchmark
 from fir_gym.training.stats import iqm
 
@@ -25,9 +27,13 @@ def test_the_plan_is_the_sb3_benchmarks_for_the_plants_and_kinds_jax_has() -> No
         spec = sb3_benchmark.PLANTS[job["env_id"]]
         assert job["steps"] == spec["steps"] and job["env_kwargs"] == spec["env_kwargs"]
         assert job["seeds"] == sb3_benchmark.SEEDS and job["episodes"] == sb3_benchmark.EPISODES
-        assert job["kind"] in sb3_benchmark.KINDS or job["kind"] == "kf"
+        plan = PLANS[job["env_id"]]
+        assert job["kind"] in (*PLAIN_KINDS, *plan.learned_estimators)
+        assert job["kind_kwargs"] == plan.estimator_kwargs.get(job["kind"], {})
     assert {j["kind"] for j in jobs if j["env_id"] == "fir_gym/Orbit-v0"} == {
-        "true", "measurement", "ekf"}
+        "true", "measurement", "measurement-stack", "ekf", "ukf", "efir"}
+    assert {j["kind"] for j in jobs if j["env_id"] == "fir_gym/CarrierMotion-v0"} == {
+        "true", "measurement", "measurement-stack", "kf", "ukf", "fir"}
     quick = benchmark.benchmark_plan(quick=True, seeds=3, plants=["fir_gym/Orbit-v0"],
                                      kinds=["ekf"])
     assert [(j["kind"], j["seeds"], j["steps"]) for j in quick] == [

@@ -321,7 +321,7 @@ def test_float64_throughout() -> None:
     assert env.observation_space(env.default_params).shape == (2,)
     assert jorbit.Orbit("measurement").observation_space(env.default_params).shape == (1,)
     with pytest.raises(ValueError, match="kind"):
-        jorbit.Orbit("ukf")
+        jorbit.Orbit("recurrent")
     with pytest.raises(ValueError, match="observation"):
         jorbit.Orbit("true", "estimate+covariance")
 

@@ -541,7 +541,7 @@ def test_unknown_keywords_and_kinds_are_refused() -> None:
     with pytest.raises(TypeError, match="mass"):
         jps.pendulum_slider_params(mass=1.0)
     with pytest.raises(ValueError, match="kind"):
-        jps.PendulumSlider("ukf")
+        jps.PendulumSlider("fir")
     with pytest.raises(ValueError, match="observation"):
         jps.PendulumSlider("true", "estimate+covariance")
 

@@ -464,7 +464,7 @@ def test_float64_throughout() -> None:
     assert juo.UncertainOscillator("measurement").observation_space(
         env.default_params).shape == (1,)
     with pytest.raises(ValueError, match="kind"):
-        juo.UncertainOscillator("ukf")
+        juo.UncertainOscillator("fir")
     with pytest.raises(ValueError, match="observation"):
         juo.UncertainOscillator("true", "estimate+covariance")
 

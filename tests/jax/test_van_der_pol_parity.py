@@ -415,6 +415,6 @@ def test_float64_and_spaces() -> None:
     assert jvdp.VanDerPol("measurement").observation_space(env.default_params).shape == (1,)
     assert env.action_space().shape == (1,) and env.name == ENV_ID
     with pytest.raises(ValueError, match="kind"):
-        jvdp.VanDerPol("ukf")
+        jvdp.VanDerPol("recurrent")
     with pytest.raises(ValueError, match="observation"):
         jvdp.VanDerPol("true", "estimate+covariance")
