@@ -122,7 +122,6 @@ def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: boo
     ``free``: on :func:`free_env` instead of Orbit-v0 (PPO's own cost); ``n_envs``: the
     recipe's 16 envs replaced (the rollout grows with it, the minibatch size stays)."""
     import jax
-    import jax.numpy as jnp
 
     from fir_gym.jax import train as jt
 
@@ -136,14 +135,14 @@ def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: boo
         env, params = jt.make_env(ENV_ID, KIND)
     algo = jt.make_algorithm(env, params, rec)
 
-    def one(key: Any) -> Any:
-        ts = algo.init_state(key)
+    def one(ts: Any) -> Any:
         ts = jax.lax.fori_loop(0, rec.iterations, lambda _, ts: algo.train_iteration(ts), ts)
         return ts.actor_ts.params
 
     program = jax.jit(jax.vmap(one))
-    keys = [jnp.stack([jax.random.PRNGKey(1000 * r + s) for s in range(seeds)])
-            for r in range(3)]
+    # the initial states outside the program, as fir_gym.jax.train.train does (its QR
+    # factorisations, batched inside a program, can deadlock XLA's CPU pool)
+    keys = [jt.initial_states(algo, [1000 * r + s for s in range(seeds)]) for r in range(3)]
     start = time.perf_counter()
     compiled = program.lower(keys[0]).compile()
     compile_seconds = time.perf_counter() - start

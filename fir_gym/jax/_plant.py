@@ -57,6 +57,22 @@ def psd_sqrt(M: jax.Array) -> jax.Array:
     return V * jnp.sqrt(jnp.clip(w, 0.0, None))
 
 
+def sqrt_of(given: Any, M: Any) -> jax.Array:
+    """A noise covariance's square root: the one the params carry — their builder computed it
+    host-side with the numpy plant's :func:`fir_gym.envs._base.psd_sqrt`, the same bits —
+    else (params made by hand without it) :func:`psd_sqrt` of ``M`` in the trace. The
+    builders precompute it because an ``eigh`` in every step is a LAPACK call, which can
+    deadlock a batched program on a small CPU (docs/jax.md, "A hang, found and avoided")."""
+    return psd_sqrt(jnp.asarray(M)) if given is None else given
+
+
+def numpy_sqrt(M: Any) -> jax.Array:
+    """:func:`fir_gym.envs._base.psd_sqrt` of ``M`` (host-side, for a params builder)."""
+    from fir_gym.envs._base import psd_sqrt as plant_psd_sqrt
+
+    return jnp.asarray(plant_psd_sqrt(np.asarray(M, dtype=np.float64)))
+
+
 def filter_prior(params: Any) -> tuple[jax.Array, jax.Array]:
     """The filter's prior: the plant's initial-state mean and covariance, floored
     (:func:`fir_gym.wrappers.estimator_observation.prior_of`)."""

@@ -83,10 +83,11 @@ from ._plant import (
     FilterModel,
     PlantState,
     filter_prior,
+    numpy_sqrt,
+    sqrt_of,
     watch_limits_of,
     watch_state,
 )
-from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import symmetrize
 
@@ -134,6 +135,10 @@ class OrbitParams(gymnax_env.EnvParams):
     nis_patience: Any = 10
     substeps: int = struct.field(pytree_node=False, default=100)
     nominal_substeps: int = struct.field(pytree_node=False, default=100)
+    #: square roots of ``initial_state_cov`` and ``Q`` (:func:`~fir_gym.jax._plant.sqrt_of`:
+    #: the builder computes them; ``None`` computes them in the trace)
+    initial_sqrt: Any = None
+    process_sqrt: Any = None
 
 
 @struct.dataclass
@@ -192,21 +197,23 @@ def orbit_params(*, mu: float = TRUE_MU, R: float = 1e-3, Q: Any = None, euler_d
         return jnp.asarray(M)
 
     x0 = np.asarray(initial_state, dtype=np.float64).reshape(2)
+    P0 = cov("initial_state_cov",
+             np.zeros((2, 2)) if initial_state_cov is None else initial_state_cov, 2)
+    Q_truth = cov("Q", truth["Q"], 2)
     return OrbitParams(
         max_steps_in_episode=int(max_episode_steps),
         mu=float(mu), thrust_max=float(thrust_max), euler_dt=float(euler_dt),
-        R=float(cov("R", R, 1)[0, 0]), Q=cov("Q", truth["Q"], 2), r_ref=float(r_ref),
+        R=float(cov("R", R, 1)[0, 0]), Q=Q_truth, r_ref=float(r_ref),
         r_min=float(r_min), r_max=float(r_max), initial_state=jnp.asarray(x0),
-        initial_state_cov=cov("initial_state_cov",
-                              np.zeros((2, 2)) if initial_state_cov is None else initial_state_cov,
-                              2),
+        initial_state_cov=P0,
         nominal_mu=float(believed["mu"]), nominal_thrust_max=float(believed["thrust_max"]),
         nominal_euler_dt=float(believed["euler_dt"]),
         nominal_R=float(cov("nominal R", believed["R"], 1)[0, 0]),
         nominal_Q=cov("nominal Q", believed["Q"], 2),
         max_covariance_trace=float(max_covariance_trace),
         nis_threshold=float(chi2.isf(nis_tail, 1)), nis_patience=int(nis_patience),
-        substeps=int(substeps), nominal_substeps=int(believed["substeps"]))
+        substeps=int(substeps), nominal_substeps=int(believed["substeps"]),
+        initial_sqrt=numpy_sqrt(P0), process_sqrt=numpy_sqrt(Q_truth))
 
 
 # ---------------------------------------------------------------------------- pure functions
@@ -280,7 +287,7 @@ def orbit_reset_noise(key: jax.Array, params: OrbitParams) -> OrbitResetNoise:
     """The noise of a reset from one draw ``z = jax.random.normal(key, (3,))``:
     ``initial = sqrt(initial_state_cov) z[:2]``, ``measurement = sqrt(R) z[2:]``."""
     z = jax.random.normal(key, (3,), dtype=jnp.float64)
-    return OrbitResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z[:2],
+    return OrbitResetNoise(sqrt_of(params.initial_sqrt, params.initial_state_cov) @ z[:2],
                            jnp.sqrt(params.R) * z[2:])
 
 
@@ -290,7 +297,7 @@ def orbit_noise(key: jax.Array, params: OrbitParams) -> OrbitNoise:
     (one draw, not one per key split: on a CPU the threefry calls cost more than the
     plant)."""
     z = jax.random.normal(key, (3,), dtype=jnp.float64)
-    return OrbitNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z[:2], jnp.sqrt(params.R) * z[2:])
+    return OrbitNoise(sqrt_of(params.process_sqrt, params.Q) @ z[:2], jnp.sqrt(params.R) * z[2:])
 
 
 def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array

@@ -115,10 +115,11 @@ from ._plant import (
     PlantState,
     belief_of,
     filter_prior,
+    numpy_sqrt,
+    sqrt_of,
     watch_limits_of,
     with_belief,
 )
-from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import (
     Belief,
@@ -202,6 +203,11 @@ class PendulumSliderParams(gymnax_env.EnvParams):
     friction: str = struct.field(pytree_node=False, default="paper")
     nominal_frame_skip: int = struct.field(pytree_node=False, default=1)
     nominal_friction: str = struct.field(pytree_node=False, default="paper")
+    #: square root(s) of the noise covariance(s) (:func:`~fir_gym.jax._plant.sqrt_of`: the
+    #: builder computes them; ``None`` computes them in the trace)
+    initial_sqrt: Any = None
+    process_sqrt: Any = None
+    measurement_sqrt: Any = None
 
 
 @struct.dataclass
@@ -364,11 +370,12 @@ def pendulum_slider_params(*, friction: str = "paper", dynamics: str = "physical
         initial_state_cov = np.diag([0.0, 0.0, 0.1 ** 2, 0.0])
     P0 = np.zeros((4, 4)) if initial_state_cov is None else _covariance(
         "initial_state_cov", initial_state_cov)
+    R_truth = _covariance("R", truth["R"], definite=True)
+    Q_truth = _covariance("Q", truth["Q"])
     return PendulumSliderParams(
         max_steps_in_episode=_positive_int("max_episode_steps", max_episode_steps),
         **phys, force_max=_positive("force_max", force_max),
-        R=jnp.asarray(_covariance("R", truth["R"], definite=True)),
-        Q=jnp.asarray(_covariance("Q", truth["Q"])), x_rest=float(x_rest),
+        R=jnp.asarray(R_truth), Q=jnp.asarray(Q_truth), x_rest=float(x_rest),
         initial_state=jnp.asarray(x0), initial_state_cov=jnp.asarray(P0),
         **{f"nominal_{name}": value for name, value in phys_model.items()},
         nominal_force_max=_positive("nominal force_max", believed["force_max"]),
@@ -378,7 +385,8 @@ def pendulum_slider_params(*, friction: str = "paper", dynamics: str = "physical
         nis_threshold=float(chi2.isf(_positive("nis_tail", nis_tail), 4)),
         nis_patience=_positive_int("nis_patience", nis_patience),
         frame_skip=skip, friction=friction, nominal_frame_skip=skip_model,
-        nominal_friction=str(believed["friction"]))
+        nominal_friction=str(believed["friction"]), initial_sqrt=numpy_sqrt(P0),
+        process_sqrt=numpy_sqrt(Q_truth), measurement_sqrt=numpy_sqrt(R_truth))
 
 
 # ---------------------------------------------------------------------------- the ODE
@@ -547,8 +555,9 @@ def pendulum_slider_reset_noise(key: jax.Array, params: PendulumSliderParams
     """The noise of a reset from one draw ``z = jax.random.normal(key, (8,))``:
     ``initial = sqrt(initial_state_cov) z[:4]``, ``measurement = sqrt(R) z[4:]``."""
     z = jax.random.normal(key, (8,), dtype=jnp.float64)
-    return PendulumSliderResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z[:4],
-                                    _psd_sqrt(jnp.asarray(params.R)) @ z[4:])
+    return PendulumSliderResetNoise(
+        sqrt_of(params.initial_sqrt, params.initial_state_cov) @ z[:4],
+        sqrt_of(params.measurement_sqrt, params.R) @ z[4:])
 
 
 def pendulum_slider_noise(key: jax.Array, params: PendulumSliderParams) -> PendulumSliderNoise:
@@ -556,8 +565,8 @@ def pendulum_slider_noise(key: jax.Array, params: PendulumSliderParams) -> Pendu
     ``process = sqrt(Q) z[:4]`` (zero for the default Q = 0), ``measurement = sqrt(R)
     z[4:]``."""
     z = jax.random.normal(key, (8,), dtype=jnp.float64)
-    return PendulumSliderNoise(_psd_sqrt(jnp.asarray(params.Q)) @ z[:4],
-                               _psd_sqrt(jnp.asarray(params.R)) @ z[4:])
+    return PendulumSliderNoise(sqrt_of(params.process_sqrt, params.Q) @ z[:4],
+                               sqrt_of(params.measurement_sqrt, params.R) @ z[4:])
 
 
 # ---------------------------------------------------------------------------- the EKF

@@ -5,7 +5,8 @@ The JAX twin of ``fir-gym train`` (:func:`fir_gym.training.train`) for the plant
 instance) with the shipped recipe of ``fir_gym/training/hyperparams/ppo.yml``
 (:func:`recipe` reads it through :meth:`fir_gym.training.RunConfig.settings`, so
 ``steps``, ``n_envs`` and ``algo_kwargs`` override it as they do for stable-baselines3),
-trained for all seeds at once: ``jax.jit(jax.vmap(one_seed))(keys)``, one compiled program.
+trained for all seeds at once: ``jax.jit(jax.vmap(one_seed))(initial_states)``, one compiled
+program (each seed's initial state made beforehand: :func:`initial_states`).
 JAX's persistent compilation cache (:func:`enable_compilation_cache`; the folder
 ``$FIR_GYM_JAX_CACHE``, else ``$XDG_CACHE_HOME/fir-gym/jax``, else ``~/.cache/fir-gym/jax``)
 keeps it on disk, so a second run of the same (plant, kind, recipe, seeds count) loads it
@@ -396,8 +397,8 @@ def _segments(iterations: int, checkpoints: int) -> tuple[int, int, int]:
 
 def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_episodes: int,
                      episodes: int, eval_seed: int) -> Any:
-    """The function of one seed's key: ``(final train state, curve returns (k,
-    curve_episodes), final returns (episodes,))``."""
+    """The function of one seed's initial train state (:func:`initial_states`): ``(final
+    train state, curve returns (k, curve_episodes), final returns (episodes,))``."""
     k, per, tail = _segments(rec.iterations, checkpoints)
     curve_keys = jax.random.split(jax.random.PRNGKey(eval_seed), curve_episodes)
     final_keys = jax.random.split(jax.random.PRNGKey(eval_seed), episodes)
@@ -405,9 +406,7 @@ def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_e
     def iterate(ts: Any, n: int) -> Any:
         return jax.lax.fori_loop(0, n, lambda _, ts: algo.train_iteration(ts), ts)
 
-    def one_seed(key: Any) -> Any:
-        ts = algo.init_state(key)
-
+    def one_seed(ts: Any) -> Any:
         def checkpoint(ts: Any, _: Any) -> Any:
             ts = iterate(ts, per)
             return ts, evaluate_policy(algo, ts, curve_keys)
@@ -418,6 +417,17 @@ def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_e
         return ts, curve, evaluate_policy(algo, ts, final_keys)
 
     return one_seed
+
+
+def initial_states(algo: SB3LikePPO, seeds: list[int]) -> Any:
+    """Each seed's initial train state (``algo.init_state(PRNGKey(seed))``), stacked along a
+    leading axis — computed one seed at a time, outside the vmapped training program: the
+    networks' orthogonal initialisation is a QR factorisation, a LAPACK call, and a batch of
+    them inside the program splits across XLA's CPU thread pool and can deadlock it
+    (docs/jax.md, "A hang, found and avoided"); one at a time each runs on the calling thread."""
+    init = jax.jit(algo.init_state)
+    states = [init(jax.random.PRNGKey(s)) for s in seeds]
+    return jax.tree.map(lambda *leaves: jnp.stack(leaves), *states)
 
 
 # ---------------------------------------------------------------------------- the cache
@@ -463,6 +473,7 @@ class JaxTraining:
     cache: str | None
     train_state: Any = field(default=None, repr=False)   # the vmapped rejax state
     kind_kwargs: dict[str, Any] = field(default_factory=dict)   # the kind's options
+    env_kwargs: dict[str, Any] = field(default_factory=dict)    # the plant's keywords
 
     @property
     def per_seed(self) -> list[float]:
@@ -519,11 +530,11 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
     program = jax.jit(jax.vmap(training_program(
         algo, rec, checkpoints=checkpoints, curve_episodes=curve_episodes, episodes=episodes,
         eval_seed=eval_seed)))
-    keys = jnp.stack([jax.random.PRNGKey(s) for s in seed_list])
     start = time.perf_counter()
-    compiled = program.lower(keys).compile()
+    initial = initial_states(algo, seed_list)
+    compiled = program.lower(initial).compile()
     compiled_at = time.perf_counter()
-    ts, curve, final = jax.block_until_ready(compiled(keys))
+    ts, curve, final = jax.block_until_ready(compiled(initial))
     done = time.perf_counter()
     k, per, _ = _segments(rec.iterations, checkpoints)
     return JaxTraining(
@@ -532,13 +543,15 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
         curves=np.asarray(curve).mean(axis=-1).tolist(),
         final_returns=np.asarray(final).tolist(),
         compile_seconds=compiled_at - start, train_seconds=done - compiled_at, cache=folder,
-        train_state=ts, kind_kwargs=dict(kind_kwargs or {}))
+        train_state=ts, kind_kwargs=dict(kind_kwargs or {}), env_kwargs=dict(env_kwargs or {}))
 
 
 def save(result: JaxTraining, out: str | Path) -> Path:
-    """Write a run folder: ``results.json`` (:meth:`JaxTraining.to_dict`), ``code_version.txt``
-    and, per seed, ``seed<s>/policy.msgpack`` (the actor's and critic's parameters and the
-    observation normalisation statistics, flax-serialised)."""
+    """Write a run folder: ``results.json`` (:meth:`JaxTraining.to_dict`: the plant, the kind
+    and their keywords, the seeds, the recipe, the returns), ``code_version.txt`` and, per
+    seed, ``seed<s>/policy.msgpack`` (the actor's and critic's parameters and the observation
+    normalisation statistics, flax-serialised, and under ``run`` the run it belongs to:
+    :func:`_identity`). :func:`load` reads it back."""
     from flax import serialization
 
     from fir_gym.code_version import code_version
@@ -553,6 +566,135 @@ def save(result: JaxTraining, out: str | Path) -> Path:
             state = {"actor": ts.actor_ts.params, "critic": ts.critic_ts.params,
                      "obs_rms": ts.obs_rms_state}
             one = jax.tree.map(lambda x, i=i: np.asarray(x)[i], state)
+            one["run"] = _identity(result.env_id, result.kind, seed, result.recipe,
+                                   result.env_kwargs, result.kind_kwargs)
             (out / f"seed{seed}").mkdir(exist_ok=True)
             (out / f"seed{seed}" / "policy.msgpack").write_bytes(serialization.to_bytes(one))
     return out
+
+
+def _identity(env_id: str, kind: str, seed: int, rec: Recipe, env_kwargs: dict[str, Any],
+              kind_kwargs: dict[str, Any]) -> dict[str, str]:
+    """What a saved policy belongs to, as strings (msgpack keeps them): the plant, the kind,
+    the seed and, as JSON, the recipe and the plant's and the kind's keywords — so that
+    :func:`load` tells a policy file of another run even where the networks' shapes agree."""
+    def text(value: Any) -> str:
+        return json.dumps(value, sort_keys=True)
+
+    return {"env_id": env_id, "kind": kind, "seed": str(seed), "recipe": text(asdict(rec)),
+            "env_kwargs": text(env_kwargs), "kind_kwargs": text(kind_kwargs)}
+
+
+def _policy_template(algo: SB3LikePPO, seeds: list[int]) -> tuple[Any, dict[str, Any]]:
+    """``(stacked initial train states of `seeds`, one seed's saved part)``: the structure,
+    shapes and dtypes a ``policy.msgpack`` of this plant, kind and recipe has."""
+    initial = initial_states(algo, seeds)
+    state = {"actor": initial.actor_ts.params, "critic": initial.critic_ts.params,
+             "obs_rms": initial.obs_rms_state}
+    return initial, jax.tree.map(lambda x: np.asarray(x)[0], state)
+
+
+def _read_policy(path: Path, template: dict[str, Any], identity: dict[str, str], run: str
+                 ) -> dict[str, Any]:
+    """One seed's ``policy.msgpack``: its ``run`` (where saved: files written before it was
+    are not checked) equal to ``identity``, then leaf by leaf the same names, shapes and
+    dtypes as ``template`` before flax restores it into the template's structure."""
+    from flax import serialization, traverse_util
+
+    try:
+        raw = serialization.msgpack_restore(path.read_bytes())
+    except Exception as err:                 # msgpack's errors have no common base
+        raise ValueError(f"{path} is not a flax-serialised policy ({type(err).__name__})"
+                         ) from None
+    saved_by = raw.pop("run", None) if isinstance(raw, dict) else None
+    if isinstance(saved_by, dict):
+        differ = [k for k in identity if saved_by.get(k) != identity[k]]
+        if differ:
+            raise ValueError(f"{path} is not a policy of {run}: it was saved by a run of "
+                             f"{saved_by.get('env_id')} {saved_by.get('kind')} seed "
+                             f"{saved_by.get('seed')} (differing in {', '.join(differ)})")
+    want = traverse_util.flatten_dict(serialization.to_state_dict(template), sep="/")
+    have = traverse_util.flatten_dict(raw, sep="/") if isinstance(raw, dict) else {}
+    if set(want) != set(have):
+        odd = sorted(set(want) ^ set(have))
+        raise ValueError(f"{path} is not a policy of {run}: its entries differ in "
+                         f"{', '.join(odd[:4])}" + (" ..." if len(odd) > 4 else ""))
+    for name, leaf in want.items():
+        got = np.asarray(have[name])
+        if got.shape != np.shape(leaf) or got.dtype != np.asarray(leaf).dtype:
+            raise ValueError(f"{path} is not a policy of {run}: {name} is {got.dtype}"
+                             f"{list(got.shape)} where the run's policy has "
+                             f"{np.asarray(leaf).dtype}{list(np.shape(leaf))}")
+    return serialization.from_state_dict(template, raw)
+
+
+def load(run_dir: str | Path) -> JaxTraining:
+    """Read a run folder of :func:`save` back into a :class:`JaxTraining`.
+
+    The recipe, the plant's and the kind's keywords, the seeds and the returns come from
+    ``results.json`` (a folder written before ``env_kwargs`` and ``kind_kwargs`` were
+    recorded reads them as ``{}``); the env and the algorithm are rebuilt from them
+    (:func:`make_env`, :func:`make_algorithm`), and ``train_state`` is the seeds' initial
+    states (:func:`initial_states`) with each seed's saved actor and critic parameters and
+    observation statistics in place, stacked along the seed axis as :func:`train` returns
+    them — enough to play the policies (:func:`fir_gym.jax.benchmark.play_in_numpy_env`,
+    :func:`evaluate_policy`), not to resume training (the optimiser's state and the reward
+    statistics are not saved). Raises ``ValueError`` naming the folder and what is missing
+    or does not fit: no ``results.json``, a run of another backend, a missing
+    ``seed<s>/policy.msgpack``, a policy of another plant, kind or recipe.
+    """
+    folder = Path(run_dir)
+    results = folder / "results.json"
+    if not results.is_file():
+        what = ("does not exist" if not folder.exists() else "is not a folder"
+                if not folder.is_dir() else "has no results.json")
+        raise ValueError(f"{folder} is not a run folder of `fir-gym train --backend jax` (it "
+                         f"{what})")
+    try:
+        data = json.loads(results.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{results} is not JSON ({err})") from None
+    if not isinstance(data, dict) or data.get("backend") != "jax":
+        backend = data.get("backend") if isinstance(data, dict) else None
+        raise ValueError(f"{folder} is not a run folder of `fir-gym train --backend jax` (its "
+                         f"results.json's backend is {backend!r}, not 'jax')")
+    absent = [k for k in ("env_id", "kind", "seeds", "recipe") if k not in data]
+    if absent:
+        raise ValueError(f"{results} lacks {', '.join(absent)}")
+    try:
+        rec = Recipe(**{**data["recipe"],
+                        "hidden_layer_sizes": tuple(data["recipe"]["hidden_layer_sizes"])})
+    except (TypeError, KeyError) as err:
+        raise ValueError(f"{results}'s recipe is not this version's ({err})") from None
+    env_id, kind, seeds = str(data["env_id"]), str(data["kind"]), [int(s) for s in data["seeds"]]
+    if not seeds:
+        raise ValueError(f"{results} lists no seeds")
+    env_kwargs = dict(data.get("env_kwargs") or {})
+    kind_kwargs = dict(data.get("kind_kwargs") or {})
+    files = [folder / f"seed{s}" / "policy.msgpack" for s in seeds]
+    missing = [str(f.relative_to(folder)) for f in files if not f.is_file()]
+    if missing:
+        raise ValueError(f"{folder} lacks {', '.join(missing)} (its results.json lists seeds "
+                         f"{seeds})")
+    try:
+        env, params = make_env(env_id, kind, env_kwargs, kind_kwargs)
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{folder}: {err}") from None
+    algo = make_algorithm(env, params, rec)
+    initial, template = _policy_template(algo, seeds)
+    run = f"{results}'s plant, kind and recipe ({env_id} {kind})"
+    saved = [_read_policy(f, template, _identity(env_id, kind, s, rec, env_kwargs,
+                                                 kind_kwargs), run)
+             for s, f in zip(seeds, files, strict=True)]
+    stacked = jax.tree.map(lambda *leaves: jnp.stack(leaves), *saved)
+    state = initial.replace(
+        actor_ts=initial.actor_ts.replace(params=stacked["actor"]),
+        critic_ts=initial.critic_ts.replace(params=stacked["critic"]),
+        obs_rms_state=stacked["obs_rms"])
+    return JaxTraining(
+        env_id=env_id, kind=kind, seeds=seeds, recipe=rec,
+        checkpoint_steps=list(data.get("checkpoint_steps", [])),
+        curves=list(data.get("curves", [])), final_returns=list(data.get("final_returns", [])),
+        compile_seconds=float(data.get("compile_seconds", math.nan)),
+        train_seconds=float(data.get("train_seconds", math.nan)), cache=data.get("cache"),
+        train_state=state, kind_kwargs=kind_kwargs, env_kwargs=env_kwargs)

@@ -106,10 +106,11 @@ from ._plant import (
     FilterModel,
     PlantState,
     filter_prior,
+    numpy_sqrt,
+    sqrt_of,
     watch_limits_of,
     watch_state,
 )
-from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import ekf_predict, kf_update_innovation
 
@@ -169,6 +170,9 @@ class UncertainOscillatorParams(gymnax_env.EnvParams):
     nis_threshold: Any = 37.324893051362324
     nis_patience: Any = 10
     uncertainty: str = struct.field(pytree_node=False, default="state")
+    #: square root(s) of the noise covariance(s) (:func:`~fir_gym.jax._plant.sqrt_of`: the
+    #: builder computes them; ``None`` computes them in the trace)
+    initial_sqrt: Any = None
 
 
 @struct.dataclass
@@ -277,7 +281,7 @@ def uncertain_oscillator_params(
         max_covariance_trace=positive("max_covariance_trace", max_covariance_trace),
         nis_threshold=float(chi2.isf(tail, 1)),
         nis_patience=positive("nis_patience", nis_patience, integer=True),
-        uncertainty=uncertainty)
+        uncertainty=uncertainty, initial_sqrt=numpy_sqrt(P0))
 
 
 # ---------------------------------------------------------------------------- pure functions
@@ -334,7 +338,8 @@ def uncertain_oscillator_reset_noise(key: jax.Array, params: UncertainOscillator
     ``initial = sqrt(initial_state_cov) z[:3]``, ``measurement = √R z[3:]``."""
     z = jax.random.normal(key, (4,), dtype=jnp.float64)
     return UncertainOscillatorResetNoise(
-        _psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z[:3], jnp.sqrt(params.R) * z[3:])
+        sqrt_of(params.initial_sqrt, params.initial_state_cov) @ z[:3],
+        jnp.sqrt(params.R) * z[3:])
 
 
 def uncertain_oscillator_noise(key: jax.Array, params: UncertainOscillatorParams

@@ -109,10 +109,11 @@ from ._plant import (
     FilterModel,
     PlantState,
     filter_prior,
+    numpy_sqrt,
+    sqrt_of,
     watch_limits_of,
     watch_state,
 )
-from ._plant import psd_sqrt as _psd_sqrt
 from ._x64 import require_x64
 from .kalman import ekf_predict, kf_update_innovation
 
@@ -164,6 +165,9 @@ class VanDerPolParams(gymnax_env.EnvParams):
     nis_patience: Any = 10
     substeps: int = struct.field(pytree_node=False, default=100)
     nominal_substeps: int = struct.field(pytree_node=False, default=100)
+    #: square root(s) of the noise covariance(s) (:func:`~fir_gym.jax._plant.sqrt_of`: the
+    #: builder computes them; ``None`` computes them in the trace)
+    initial_sqrt: Any = None
 
 
 @struct.dataclass
@@ -307,7 +311,7 @@ def van_der_pol_params(*, epsilon: float = 1.0, Q: float = 5.0, R: float = 5.0, 
         nominal_u_max=believed["u_max"], model_Q=jnp.asarray(model_Q), model_R=model_R,
         max_covariance_trace=trace_limit, nis_threshold=float(chi2.isf(nis_tail, 1)),
         nis_patience=patience, substeps=truth["substeps"],
-        nominal_substeps=believed["substeps"])
+        nominal_substeps=believed["substeps"], initial_sqrt=numpy_sqrt(P0))
 
 
 # ---------------------------------------------------------------------------- pure functions
@@ -417,7 +421,7 @@ def van_der_pol_reset_noise(key: jax.Array, params: VanDerPolParams) -> VanDerPo
     """The noise of a reset from one draw ``z = jax.random.normal(key, (3,))``:
     ``initial = sqrt(initial_state_cov) z[:2]``, ``measurement = √(R/h) z[2:]``."""
     z = jax.random.normal(key, (3,), dtype=jnp.float64)
-    return VanDerPolResetNoise(_psd_sqrt(jnp.asarray(params.initial_state_cov)) @ z[:2],
+    return VanDerPolResetNoise(sqrt_of(params.initial_sqrt, params.initial_state_cov) @ z[:2],
                                _measurement_sqrt(params) * z[2:])
 
 
