@@ -80,18 +80,20 @@ UKF = FilterKind(
     options={"alpha": 1e-3, "beta": 2.0, "kappa": 0.0},
     start=lambda x0, P0, options: (),
     update=_ukf_update, predict_update=_ukf_step)
-EFIR = FilterKind(
-    options={"horizon": None},
-    start=lambda x0, P0, options: fir.efir_start(x0, P0, options["horizon"]),
-    update=lambda memory, x, P, y, model, options: fir.efir_update(memory, x, P, y, model),
-    predict_update=lambda memory, x, P, y, u, model, options: fir.efir_predict_update(
-        memory, x, P, y, u, model))
-FIR = FilterKind(
-    options={"horizon": None},
-    start=lambda x0, P0, options: fir.fir_start(x0, P0, options["horizon"]),
-    update=lambda memory, x, P, y, model, options: fir.fir_update(memory, x, P, y, model),
-    predict_update=lambda memory, x, P, y, u, model, options: fir.fir_predict_update(
-        memory, x, P, y, u, model))
+def _windowed(start: Callable[..., Any], update: Callable[..., Result],
+              predict_update: Callable[..., Result]) -> FilterKind:
+    """A FIR-family filter of :mod:`fir_gym.jax.fir`: one option, ``horizon`` (the bank's
+    length), which only its memory's start needs."""
+    return FilterKind(
+        options={"horizon": None},
+        start=lambda x0, P0, options: start(x0, P0, options["horizon"]),
+        update=lambda memory, x, P, y, model, options: update(memory, x, P, y, model),
+        predict_update=lambda memory, x, P, y, u, model, options: predict_update(
+            memory, x, P, y, u, model))
+
+
+EFIR = _windowed(fir.efir_start, fir.efir_update, fir.efir_predict_update)
+FIR = _windowed(fir.fir_start, fir.fir_update, fir.fir_predict_update)
 
 #: the generic filter kinds by name (the numpy registry's names)
 GENERIC_FILTERS: dict[str, FilterKind] = {"ukf": UKF, "efir": EFIR, "fir": FIR}

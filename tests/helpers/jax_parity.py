@@ -47,3 +47,35 @@ def relative_error(got: np.ndarray, want: np.ndarray) -> float:
         return float("inf")
     with np.errstate(divide="ignore", invalid="ignore"):
         return float(np.nanmax(np.where(scale > 0, diff / scale, 0.0)))
+
+
+#: what a numpy plant publishes for the wrappers to build a filter from
+PUBLISHED = ("model", "initial_state", "initial_state_cov", "default_horizon")
+
+
+def replay(ys: np.ndarray, applied: np.ndarray, plant: Any = None) -> Any:
+    """A numpy env (a :class:`gymnasium.Env`) replaying recorded measurements ``ys`` (the
+    reset's first) and reporting the recorded applied actions ``applied`` in
+    ``info["action"]`` — what the numpy wrappers (``MeasurementStack``,
+    ``EstimatorObservation``) read — and, given a numpy ``plant``, publishing its
+    :data:`PUBLISHED` attributes."""
+    import gymnasium as gym
+    from gymnasium import spaces
+
+    class Replay(gym.Env):
+        def __init__(self) -> None:
+            self.ys, self.applied, self.k = ys, applied, 0
+            for name in PUBLISHED if plant is not None else ():
+                setattr(self, name, getattr(plant, name))
+            self.observation_space = spaces.Box(-np.inf, np.inf, ys.shape[1:], np.float64)
+            self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+        def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
+            self.k = 0
+            return self.ys[0], {}
+
+        def step(self, action: Any) -> Any:
+            self.k += 1
+            return self.ys[self.k], 0.0, False, False, {"action": self.applied[self.k - 1]}
+
+    return Replay()

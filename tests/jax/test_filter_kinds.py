@@ -30,7 +30,7 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from gymnasium import spaces  # noqa: E402
+from jax_parity import replay  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
@@ -50,28 +50,6 @@ def normwise(got: np.ndarray, want: np.ndarray) -> float:
     """``max |got − want| / max |want|`` (a covariance's off-diagonal entries may be exact
     zeros in one filter and round-off in the other)."""
     return float(np.max(np.abs(got - want)) / max(float(np.max(np.abs(want))), 1e-300))
-
-
-class Replay(gym.Env):
-    """Replays recorded measurements, reports the recorded applied actions as
-    ``info["action"]``, and publishes a numpy plant's filter-facing attributes."""
-
-    PUBLISHED = ("model", "initial_state", "initial_state_cov", "default_horizon")
-
-    def __init__(self, plant: Any, ys: np.ndarray, applied: np.ndarray) -> None:
-        self.ys, self.applied, self.k = ys, applied, 0
-        for name in self.PUBLISHED:
-            setattr(self, name, getattr(plant, name))
-        self.observation_space = spaces.Box(-np.inf, np.inf, ys.shape[1:], np.float64)
-        self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
-
-    def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
-        self.k = 0
-        return self.ys[0], {}
-
-    def step(self, action: Any) -> Any:
-        self.k += 1
-        return self.ys[self.k], 0.0, False, False, {"action": self.applied[self.k - 1]}
 
 
 def _jax_rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
@@ -100,7 +78,7 @@ def test_the_kind_is_the_numpy_envs_filter(env_id: str, kind: str) -> None:
     ys = np.array([np.asarray(s.y) for s, _ in run])
     applied = np.array([np.asarray(i["action"]) for _, i in run[1:]])
     with_plant = gym.make(env_id, **plan.env_kwargs)
-    numpy_env = EstimatorObservation(Replay(with_plant.unwrapped, ys, applied), kind, **options)
+    numpy_env = EstimatorObservation(replay(ys, applied, with_plant.unwrapped), kind, **options)
     with_plant.close()
     estimate, _ = numpy_env.reset()
     worst = {"x": 0.0, "P": 0.0, "nis": 0.0}

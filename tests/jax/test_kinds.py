@@ -22,7 +22,7 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from gymnasium import spaces  # noqa: E402
+from jax_parity import replay  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
@@ -31,24 +31,6 @@ from fir_gym.robustness.plan import PLANTS as PLANS  # noqa: E402
 from fir_gym.wrappers.measurement_stack import MeasurementStack  # noqa: E402
 
 STEPS = 120
-
-
-class Replay(gym.Env):
-    """A numpy env that replays recorded measurements and reports the recorded applied
-    actions in ``info["action"]`` (what :class:`MeasurementStack` records)."""
-
-    def __init__(self, ys: np.ndarray, applied: np.ndarray) -> None:
-        self.ys, self.applied, self.k = ys, applied, 0
-        self.observation_space = spaces.Box(-np.inf, np.inf, ys.shape[1:], np.float64)
-        self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
-
-    def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
-        self.k = 0
-        return self.ys[0], {}
-
-    def step(self, action: Any) -> Any:
-        self.k += 1
-        return self.ys[self.k], 0.0, False, False, {"action": self.applied[self.k - 1]}
 
 
 def _rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> tuple[list, list]:
@@ -76,7 +58,7 @@ def test_the_measurement_stack_is_the_numpy_wrappers_window(env_id: str) -> None
     ys = np.array([np.asarray(s.y) for s in states])
     applied = np.array([np.asarray(i["action"]) for i in infos])
     assert np.any(applied != actions)                      # clipping was exercised
-    wrapper = MeasurementStack(Replay(ys, applied), horizon=numpy_plant.default_horizon)
+    wrapper = MeasurementStack(replay(ys, applied), horizon=numpy_plant.default_horizon)
     want, _ = wrapper.reset()
     assert env.observation_space(params).shape == want.shape
     np.testing.assert_array_equal(np.asarray(observations[0]), want)
