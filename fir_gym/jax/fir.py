@@ -72,8 +72,10 @@ false) on its numpy path, whose operations these follow in its order (its compil
 agrees with it to round-off), except that a ``2 × 2`` information matrix is inverted, and its
 determinant and smallest eigenvalue taken, in closed form rather than by LAPACK (under
 ``vmap`` on a CPU the batched LAPACK calls cost as much as the rest of a step; the results
-agree to round-off, the regularity decisions exactly on the tests' cases). Every function
-is pure and shape-static: ``jit``- and ``vmap``-able.
+agree to round-off, the regularity decisions exactly on the tests' cases), and larger ones
+by :mod:`fir_gym.jax.small_linalg`'s unrolled LU, Jacobi and Cholesky (no LAPACK custom
+call in a step: see there why). Every function is pure and shape-static: ``jit``- and
+``vmap``-able.
 """
 
 from __future__ import annotations
@@ -84,6 +86,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from . import small_linalg
 from ._plant import FilterModel
 from .kalman import symmetrize
 
@@ -151,36 +154,38 @@ def bank_update(Z: jax.Array, C: jax.Array, R: jax.Array, y: jax.Array) -> jax.A
         g = (r[:, 0, :2 * n] / (CPC + R[0, 0])[:, None])[:, None]  # (W, 1, 2n)
     else:
         Sig = _times_rows(C, r[:, :, :n].swapaxes(1, 2)).swapaxes(1, 2) + R
-        g = jnp.linalg.solve(Sig, r[:, :, :2 * n])                 # (W, p, 2n)
+        g = jax.vmap(small_linalg.solve)(Sig, r[:, :, :2 * n])     # (W, p, 2n)
     for q in range(p):
         Z = Z - g[:, q, :, None] * r[:, q, None, :]
     return Z
 
 
 def _det(M: jax.Array) -> jax.Array:
-    """``det M``: in closed form for ``2 × 2`` (the batched LAPACK calls cost more than the
-    rest of a step there), else by LU (:func:`jax.numpy.linalg.det`)."""
+    """``det M``: in closed form for ``2 × 2``, else by LU with partial pivoting
+    (:func:`fir_gym.jax.small_linalg.det`, as :func:`jax.numpy.linalg.det`)."""
     if M.shape[0] == 2:
         return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-    return jnp.linalg.det(M)
+    return small_linalg.det(M)
 
 
 def _inv(M: jax.Array) -> jax.Array:
     """``M⁻¹``: the adjugate over the determinant for ``2 × 2`` (inf/NaN where singular, as
-    the reference's LAPACK inverse raises or overflows), else by LU."""
+    the reference's LAPACK inverse raises or overflows), else by LU
+    (:func:`fir_gym.jax.small_linalg.inv`)."""
     if M.shape[0] == 2:
         adjugate = jnp.array([[M[1, 1], -M[0, 1]], [-M[1, 0], M[0, 0]]])
         return adjugate / _det(M)
-    return jnp.linalg.inv(M)
+    return small_linalg.inv(M)
 
 
 def _smallest_eigenvalue(S: jax.Array) -> jax.Array:
     """``λ_min`` of the symmetric matrix whose lower triangle is ``S``'s
-    (:func:`numpy.linalg.eigvalsh`): ``(a + d)/2 − √(((a − d)/2)² + c²)`` for ``2 × 2``."""
+    (:func:`numpy.linalg.eigvalsh`): ``(a + d)/2 − √(((a − d)/2)² + c²)`` for ``2 × 2``, else
+    by Jacobi rotations (:func:`fir_gym.jax.small_linalg.eigvalsh`)."""
     if S.shape[0] == 2:
         a, c, d = S[0, 0], S[1, 0], S[1, 1]
         return 0.5 * (a + d) - jnp.sqrt((0.5 * (a - d)) ** 2 + c * c)
-    return jnp.linalg.eigvalsh(S, symmetrize_input=False)[0]
+    return small_linalg.eigvalsh(S, symmetrize_input=False)[0]
 
 
 def information_is_regular(F: jax.Array) -> jax.Array:
@@ -216,7 +221,7 @@ def bank_estimate(Z: jax.Array, w: jax.Array, prior: jax.Array | None = None
         V = _inv(jnp.where(regular, F, jnp.eye(n)))
     else:
         M = jnp.eye(n) - prior @ Zs[n:, n:2 * n]
-        V = _inv(M) @ prior if n == 2 else jnp.linalg.solve(M, prior)
+        V = _inv(M) @ prior if n == 2 else small_linalg.solve(M, prior)
         regular = jnp.asarray(True)
     T = Zs[:n, n:2 * n]
     TV = T @ V
@@ -236,8 +241,7 @@ def spd_inverse(S: jax.Array) -> jax.Array:
         det = a * d - b * b
         det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
         return jnp.array([[d / det, -b / det], [-b / det, a / det]])
-    L = jnp.linalg.cholesky(S)                                      # NaN where not PD
-    return jax.scipy.linalg.cho_solve((L, True), jnp.eye(m))
+    return small_linalg.spd_inverse(S)                              # NaN where not PD
 
 
 def innovation_nis(P_pred: jax.Array, e: jax.Array, H: jax.Array, R: jax.Array) -> jax.Array:

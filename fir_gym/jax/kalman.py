@@ -9,7 +9,8 @@ their step (``vmap`` them for a batch):
 * :func:`kf_update` — :func:`fir_gym.estimators.kalman.kf_update`: the Joseph-form update
   ``x⁺ = x + K e``, ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` (symmetrised), ``K = P Hᵀ
   S⁻¹``, ``S = H P Hᵀ + R``, ``e = y − H x``, and the normalised innovation squared ``eᵀ
-  S⁻¹ e``. ``S⁻¹`` comes from its Cholesky factor; where ``S`` is not positive definite the
+  S⁻¹ e``. ``S⁻¹`` comes from its Cholesky factor (:mod:`fir_gym.jax.small_linalg`:
+  unrolled, no LAPACK call, see there why); where ``S`` is not positive definite the
   factor, and with it ``x⁺``, ``P⁺`` and the NIS, are NaN (the numpy filter's rule: the
   watch then keeps the last finite estimate and raises ``diverged``). The numpy reference
   forms the Joseph product from factors (:func:`fir_gym.estimators._kalman_linalg.
@@ -30,8 +31,9 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 from flax import struct
+
+from . import small_linalg
 
 
 @struct.dataclass
@@ -109,12 +111,12 @@ def kf_update_innovation(x: jax.Array, P: jax.Array, e: jax.Array, H: jax.Array,
     """:func:`kf_update` given the innovation ``e`` (``y − h(x⁻)`` for an EKF, with ``H``
     the Jacobian of ``h`` at ``x⁻``)."""
     S = symmetrize(H @ P @ H.T + R)
-    L = jnp.linalg.cholesky(S)                         # NaN where S is not PD
+    L = small_linalg.cholesky(S)                       # NaN where S is not PD
     PHt = P @ H.T
-    K = jsl.cho_solve((L, True), PHt.T).T              # P Hᵀ S⁻¹
+    K = small_linalg.cho_solve(L, PHt.T).T             # P Hᵀ S⁻¹
     A = jnp.eye(P.shape[0]) - K @ H
     P_new = symmetrize(A @ P @ A.T + K @ R @ K.T)
-    w = jsl.solve_triangular(L, e, lower=True)         # L⁻¹ e: nis = |w|²
+    w = small_linalg.solve_lower(L, e)                 # L⁻¹ e: nis = |w|²
     return x + K @ e, P_new, w @ w
 
 

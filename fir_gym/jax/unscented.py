@@ -52,7 +52,9 @@ steps: 3e-8 in ``x``, 3e-7 in ``P``); with XLA kept off FMA instructions
 agree to ≈ 1e-11 either way.
 
 Every function is pure and shape-static (Python branches only on shapes and options):
-``jit``- and ``vmap``-able.
+``jit``- and ``vmap``-able. The factorisations (Cholesky, the symmetric eigen-decomposition,
+Cholesky solves) are :mod:`fir_gym.jax.small_linalg`'s unrolled ones: no LAPACK custom call
+in a step (see there why).
 """
 
 from __future__ import annotations
@@ -62,9 +64,9 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import numpy as np
 
+from . import small_linalg
 from ._plant import FilterModel
 from .kalman import symmetrize
 
@@ -120,9 +122,9 @@ def matrix_sqrt(P: jax.Array) -> jax.Array:
     positive semi-definite ``P`` (``λ_min ≥ −PSD_TOL · max(λ_max, 0)``); NaN for an
     indefinite or non-finite ``P`` (:func:`fir_gym.estimators.unscented.matrix_sqrt`, no
     jitter)."""
-    L = jnp.linalg.cholesky(P)                       # NaN where P is not PD
+    L = small_linalg.cholesky(P)                     # NaN where P is not PD
     finite = jnp.all(jnp.isfinite(P))
-    lam, V = jnp.linalg.eigh(jnp.where(finite, P, 0.0))
+    lam, V = small_linalg.eigh(jnp.where(finite, P, 0.0))
     semidefinite = finite & (lam[0] >= -PSD_TOL * jnp.maximum(lam[-1], 0.0))
     fallback = jnp.where(semidefinite, V * jnp.sqrt(jnp.clip(lam, 0.0, None)), jnp.nan)
     return jnp.where(jnp.all(jnp.isfinite(L)), L, fallback)
@@ -148,8 +150,7 @@ def spd_inverse(S: jax.Array) -> jax.Array:
         det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
         off = -b / det
         return jnp.array([[d / det, off], [off, a / det]])
-    L = jnp.linalg.cholesky(S)                       # NaN where S is not PD
-    return jsl.cho_solve((L, True), jnp.eye(m, dtype=S.dtype))
+    return small_linalg.spd_inverse(S)               # NaN where S is not PD
 
 
 def psd_factor(P: jax.Array) -> jax.Array:
@@ -174,7 +175,7 @@ def psd_factor(P: jax.Array) -> jax.Array:
             L = L.at[j + 1:, j].set(jnp.where(keep, col / ljj, 0.0))
     Ps = 0.5 * (P + P.T)
     finite = jnp.all(jnp.isfinite(Ps))
-    lam, V = jnp.linalg.eigh(jnp.where(finite, Ps, 0.0))
+    lam, V = small_linalg.eigh(jnp.where(finite, Ps, 0.0))
     nearest = jnp.where(finite, V * jnp.sqrt(jnp.maximum(lam, 0.0)), jnp.nan)
     return jnp.where(indefinite, nearest, L)
 
