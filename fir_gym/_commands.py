@@ -238,8 +238,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             raise ValueError("give --model (a run folder) or --env with --kind, not both")
         if Path(args.model, "results.json").is_file() and not Path(args.model,
                                                                    "run.json").is_file():
-            raise ValueError(f"--model {args.model} was trained with --backend jax: its "
-                             "returns are in its results.json (evaluate plays sb3 runs)")
+            return evaluate_jax(args)
         if not Path(args.model, "run.json").is_file():
             what = "does not exist" if not Path(args.model).exists() else "has no run.json"
             raise ValueError(f"--model {args.model} is not a run folder of `fir-gym train` "
@@ -272,6 +271,43 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                  "singular P blow it up)" if result.nees_median is not None
                  else f"; ANEES {result.anees:.3g}")
     print(line)
+    return 0
+
+
+def evaluate_jax(args: argparse.Namespace) -> int:
+    """``fir-gym evaluate --model RUN`` on a run folder of ``fir-gym train --backend jax``:
+    every seed's deterministic policy (:func:`fir_gym.jax.train.load`) played in the numpy
+    env on the episodes seeded ``--seed`` + i (:func:`fir_gym.jax.benchmark.
+    play_in_numpy_env`); one line per seed, then the returns over all and the IQM over the
+    seeds' means."""
+    import statistics
+
+    from ._extras import require
+
+    require("jax", "gymnax", "rejax")                  # a missing extra: its one line
+    refused = {"--best": args.best, "--env-kwargs": bool(args.env_kwargs),
+               "--kind-kwargs": bool(args.kind_kwargs)}
+    if any(refused.values()):
+        raise ValueError(f"--model {args.model} was trained with --backend jax: evaluate plays "
+                         "it with the plant and kind options of its results.json and takes no "
+                         + ", ".join(k for k, v in refused.items() if v))
+    # fir_gym.jax is imported here only, when asked for (tests/jax/test_jax_boundary.py)
+    from .jax.benchmark import play_in_numpy_env
+    from .jax.train import load
+    from .training.stats import iqm
+
+    result = load(args.model)
+    with working(f"evaluating {args.episodes} episodes x {len(result.seeds)} seed(s)",
+                 enabled=not args.no_progress):
+        returns = play_in_numpy_env(result, args.episodes, args.seed)
+    for seed, seed_returns in zip(result.seeds, returns, strict=True):
+        print(f"seed {seed}: return {statistics.fmean(seed_returns):.4g} ± "
+              f"{statistics.pstdev(seed_returns):.3g} over {args.episodes} episodes")
+    every = [r for seed_returns in returns for r in seed_returns]
+    print(f"{result.env_id} observing {result.kind}: return {statistics.fmean(every):.4g} ± "
+          f"{statistics.pstdev(every):.3g} over {args.episodes} episodes x "
+          f"{len(result.seeds)} seed(s), IQM over seeds "
+          f"{iqm([statistics.fmean(r) for r in returns]):.4g}")
     return 0
 
 

@@ -106,11 +106,26 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
 
 def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
                   seed: int = EVAL_SEED) -> list[list[float]]:
+    """:func:`play_in_numpy_env` on the plant built with ``env_kwargs`` (the benchmark job's,
+    which :func:`fir_gym.jax.train.train` also records in ``result.env_kwargs``)."""
+    return play_in_numpy_env(result, episodes, seed, env_kwargs=env_kwargs)
+
+
+def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED, *,
+                      env_kwargs: dict[str, Any] | None = None) -> list[list[float]]:
     """Each trained seed's deterministic policy played in the *numpy* env (``make_single_env``,
-    as the SB3 benchmark builds it) on the SB3 benchmark's evaluation episodes (episode ``i``
-    from ``reset(seed=seed + i)``): ``[seed][episode]`` raw returns. The JAX and the numpy
-    plants agree given the same noise (the parity tests), so these rows differ from the SB3
-    ones only by the controllers — the same episodes, not merely the same distribution."""
+    as ``fir-gym evaluate`` and the SB3 benchmark build it) on the SB3 evaluation's episodes
+    (episode ``i`` from ``reset(seed=seed + i)``): ``[seed][episode]`` raw returns.
+
+    ``result``: a :class:`fir_gym.jax.train.JaxTraining` with its train state — just trained
+    (:func:`fir_gym.jax.train.train`) or read from a run folder
+    (:func:`fir_gym.jax.train.load`); the plant's keywords are ``result.env_kwargs`` unless
+    ``env_kwargs`` is given, the kind's options ``result.kind_kwargs``. The policy acts on
+    the observation through the run's final normalisation statistics, its Gaussian's mean
+    clipped to the action box (:meth:`fir_gym.jax.train.Policy.mean_action`). The JAX and
+    the numpy plants agree given the same noise (the parity tests), so these returns differ
+    from the SB3 backend's only by the controllers — the same episodes, not merely the same
+    distribution."""
     import jax
     import numpy as np
 
@@ -118,7 +133,12 @@ def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
 
     from .train import make_algorithm, make_env
 
-    env_j, params = make_env(result.env_id, result.kind, env_kwargs, result.kind_kwargs)
+    ts = result.train_state
+    if ts is None:
+        raise ValueError(f"{result.env_id} {result.kind}: the result has no train state (a "
+                         "run folder's policies are read by fir_gym.jax.train.load)")
+    plant = dict(result.env_kwargs if env_kwargs is None else env_kwargs)
+    env_j, params = make_env(result.env_id, result.kind, plant, result.kind_kwargs)
     algo = make_algorithm(env_j, params, result.recipe)
 
     @jax.jit
@@ -127,29 +147,30 @@ def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
         return algo.actor.apply(actor, seen[None], method="mean_action")[0]
 
     kind, options = result.kind, dict(result.kind_kwargs)
-    env = (make_single_env(result.env_id, observation="true", **env_kwargs) if kind == "true"
-           else make_single_env(result.env_id, **env_kwargs) if kind == "measurement"
+    env = (make_single_env(result.env_id, observation="true", **plant) if kind == "true"
+           else make_single_env(result.env_id, **plant) if kind == "measurement"
            else make_single_env(result.env_id, observation="measurement-stack",
-                                stack_horizon=options.get("horizon"), **env_kwargs)
+                                stack_horizon=options.get("horizon"), **plant)
            if kind == "measurement-stack"
            else make_single_env(result.env_id, estimator=kind, estimator_kwargs=options,
-                                **env_kwargs))
-    ts = result.train_state
+                                **plant))
     out = []
-    for i in range(len(result.seeds)):
-        actor = jax.tree.map(lambda x, i=i: x[i], ts.actor_ts.params)
-        rms = jax.tree.map(lambda x, i=i: x[i], ts.obs_rms_state)
-        returns = []
-        for episode in range(episodes):
-            obs, _ = env.reset(seed=seed + episode)
-            total, done = 0.0, False
-            while not done:
-                action = np.asarray(act(actor, rms, np.asarray(obs, dtype=np.float64)))
-                obs, reward, terminated, truncated, _ = env.step(action.astype(np.float32))
-                total, done = total + float(reward), terminated or truncated
-            returns.append(total)
-        out.append(returns)
-    env.close()
+    try:
+        for i in range(len(result.seeds)):
+            actor = jax.tree.map(lambda x, i=i: x[i], ts.actor_ts.params)
+            rms = jax.tree.map(lambda x, i=i: x[i], ts.obs_rms_state)
+            returns = []
+            for episode in range(episodes):
+                obs, _ = env.reset(seed=seed + episode)
+                total, done = 0.0, False
+                while not done:
+                    action = np.asarray(act(actor, rms, np.asarray(obs, dtype=np.float64)))
+                    obs, reward, terminated, truncated, _ = env.step(action.astype(np.float32))
+                    total, done = total + float(reward), terminated or truncated
+                returns.append(total)
+            out.append(returns)
+    finally:
+        env.close()
     return out
 
 

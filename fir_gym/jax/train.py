@@ -459,7 +459,8 @@ def enable_compilation_cache(folder: str | Path | None = None) -> Path:
 # ---------------------------------------------------------------------------- training
 @dataclass
 class JaxTraining:
-    """The result of :func:`train`: per-seed learning curves and final returns."""
+    """The result of :func:`train` (or of :func:`load`, reading its run folder): per-seed
+    learning curves and final returns, and the trained policies in ``train_state``."""
 
     env_id: str
     kind: str
