@@ -45,7 +45,8 @@ def resolved_imports(path: Path) -> dict[str, list[str]]:
 #: the places outside fir_gym.jax that import it, each inside the function that runs it
 #: (nothing at module level): `fir-gym train --backend jax`, `fir-gym benchmark-controllers
 #: --backend jax`
-ALLOWED = {("fir_gym/_commands.py", "train_jax"), ("fir_gym/_commands.py", "benchmark_jax")}
+ALLOWED = {("fir_gym/_commands.py", "train_jax"), ("fir_gym/_commands.py", "benchmark_jax"),
+           ("fir_gym/_commands.py", "evaluate_jax")}
 #: modules that exist to measure the JAX backend (`fir-gym speed training`): JAX inside their
 #: functions only
 MEASURING = {"fir_gym/benchmarks/jax_training.py"}
