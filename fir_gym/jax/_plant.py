@@ -51,9 +51,13 @@ class FilterModel:
 
 
 def psd_sqrt(M: jax.Array) -> jax.Array:
-    """``V Λ₊^½`` with ``M = V Λ Vᵀ``: :func:`fir_gym.envs._base.psd_sqrt`, the square root
-    that turns standard normals into a plant's noise increments."""
-    w, V = jnp.linalg.eigh(M)
+    """``V Λ₊^½`` with ``M = V Λ Vᵀ`` (:func:`fir_gym.jax.small_linalg.eigh`, no LAPACK):
+    :func:`fir_gym.envs._base.psd_sqrt`, the square root that turns standard normals into a
+    plant's noise increments — to round-off, not to the bit (the eigenvectors' signs and
+    the rounding differ from LAPACK's; the params builders use the numpy one)."""
+    from .small_linalg import eigh
+
+    w, V = eigh(jnp.asarray(M))
     return V * jnp.sqrt(jnp.clip(w, 0.0, None))
 
 

@@ -10,9 +10,9 @@ selections, with no call into ``jnp.linalg``, ``jax.scipy.linalg`` or ``lax.lina
 Cholesky, ``eigh``, LU, QR) split a *batched* call (one under ``vmap``) into chunks, run the
 chunks on XLA's intra-op thread pool and block until they finish. When the executor runs two
 such calls at once on a pool with two workers, each worker waits for chunks that no free
-worker can run, and the program hangs for ever (docs/jax.md, "A known hang"). Without the
-custom calls there is nothing to wait for; at these sizes the unrolled arithmetic is also
-cheaper than a kernel call per step, and exact to round-off.
+worker can run, and the program hangs for ever (docs/jax.md, "A hang, found and
+avoided"). Without the custom calls there is nothing to wait for; at these sizes the
+unrolled arithmetic is also cheaper than a kernel call per step, and exact to round-off.
 
 Each function is for one matrix (``vmap`` it for a batch) of ``float64`` entries; sizes are
 read from the shapes (static), never from the data. Failures are NaN, as in ``jnp.linalg``:
@@ -123,13 +123,13 @@ def solve_upper(U: jax.Array, B: jax.Array) -> jax.Array:
     ``(n,)`` or ``(n, k)``, by back substitution."""
     n = _square(U, "U")
     rows, _ = _rows(B, n)
-    x: list[jax.Array | None] = [None] * n
+    x: dict[int, jax.Array] = {}
     for i in reversed(range(n)):
         s = rows[i]
         for k in range(i + 1, n):
             s = s - U[i, k] * x[k]
         x[i] = s / U[i, i]
-    return jnp.stack(x)
+    return jnp.stack([x[i] for i in range(n)])
 
 
 def cho_solve(L: jax.Array, B: jax.Array) -> jax.Array:

@@ -96,24 +96,12 @@ def merwe_weights(n: int, alpha: float = 1e-3, beta: float = 2.0, kappa: float =
                   ) -> SigmaWeights:
     """The ``2n + 1`` scaled sigma points and weights of
     :class:`fir_gym.estimators.unscented.MerweScaledSigmaPoints` (paper 003, Table 1 and
-    eq 6), computed in numpy operation for operation as there (same bits)."""
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n must be a positive integer; got {n!r}")
-    if not np.isfinite(alpha) or alpha <= 0:
-        raise ValueError(f"alpha must be positive; got {alpha!r}")
-    if not np.isfinite(beta) or not np.isfinite(kappa) or n + kappa <= 0:
-        raise ValueError(f"beta must be finite and n + kappa > 0; got beta={beta!r}, "
-                         f"kappa={kappa!r}, n={n}")
-    lam = alpha**2 * (n + kappa) - n
-    c = n + lam
-    xi = np.vstack([np.zeros(n), np.sqrt(c) * np.eye(n), -np.sqrt(c) * np.eye(n)])
-    Wm = np.full(2 * n + 1, 0.5 / c)
-    Wc = Wm.copy()
-    Wm[0] = lam / c
-    Wc[0] = lam / c + 1.0 - alpha**2 + beta
-    for a in (xi, Wm, Wc):
-        a.setflags(write=False)
-    return SigmaWeights(xi, Wm, Wc, float(Wc.sum()), bool(np.array_equal(Wm[1:], Wc[1:])))
+    eq 6) — read from an instance of it, so the same bits and the same validation
+    (``ValueError`` naming the bad argument)."""
+    from fir_gym.estimators.unscented import MerweScaledSigmaPoints
+
+    points = MerweScaledSigmaPoints(n, alpha, beta, kappa)
+    return SigmaWeights(points.xi, points.Wm, points.Wc, points.sum_Wc, points.same_tail)
 
 
 # ---------------------------------------------------------------------------- linear algebra

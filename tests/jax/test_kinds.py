@@ -108,3 +108,27 @@ def test_the_filter_model_is_the_model_of_the_plants_own_filter(env_id: str) -> 
         compared += 1
     assert compared >= STEPS // 2, f"only {compared} steps before the episode ended"
     assert worst < 1e-11, worst
+
+
+@pytest.mark.parametrize("env_id", list(PLANTS))
+def test_the_params_carry_the_numpy_plants_noise_square_roots(env_id: str) -> None:
+    """The builders compute each noise square root once with the numpy plant's psd_sqrt
+    (no eigh in the steps); params made without them compute one in the trace
+    (_plant.psd_sqrt, LAPACK-free) that squares to the same covariance."""
+    from fir_gym.envs._base import psd_sqrt as numpy_psd_sqrt
+    from fir_gym.jax._plant import psd_sqrt
+
+    _, params = make(env_id, **PLANS[env_id].env_kwargs)
+    pairs = {"initial_sqrt": "initial_state_cov", "process_sqrt": "Q",
+             "measurement_sqrt": "R"}
+    checked = 0
+    for field, cov in pairs.items():
+        S = getattr(params, field, None)
+        if S is None or not hasattr(params, cov):
+            continue
+        M = np.asarray(getattr(params, cov))
+        np.testing.assert_array_equal(np.asarray(S), numpy_psd_sqrt(M))
+        T = np.asarray(jax.jit(psd_sqrt)(jnp.asarray(M)))
+        np.testing.assert_allclose(T @ T.T, M, rtol=0, atol=1e-14 * max(np.abs(M).max(), 1e-300))
+        checked += 1
+    assert checked >= 1
