@@ -142,7 +142,10 @@ def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: boo
     program = jax.jit(jax.vmap(one))
     # the initial states outside the program, as fir_gym.jax.train.train does (its QR
     # factorisations, batched inside a program, can deadlock XLA's CPU pool)
-    keys = [jt.initial_states(algo, [1000 * r + s for s in range(seeds)]) for r in range(3)]
+    # (one call for the three runs: each call's states are of a class of their own)
+    states = jt.initial_states(algo, [1000 * r + s for r in range(3) for s in range(seeds)])
+    keys = [jax.tree.map(lambda x, r=r: x[r * seeds:(r + 1) * seeds], states)
+            for r in range(3)]
     start = time.perf_counter()
     compiled = program.lower(keys[0]).compile()
     compile_seconds = time.perf_counter() - start
