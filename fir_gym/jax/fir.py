@@ -229,26 +229,11 @@ def bank_estimate(Z: jax.Array, w: jax.Array, prior: jax.Array | None = None
 
 
 # ---------------------------------------------------------------------------- the NIS
-def spd_inverse(S: jax.Array) -> jax.Array:
-    """``S⁻¹`` of a symmetric positive-definite ``S``, NaN where it is not
-    (:func:`fir_gym.estimators._kalman_linalg.spd_inverse`: closed forms for one and two
-    channels, Cholesky beyond)."""
-    m = S.shape[0]
-    if m == 1:
-        return jnp.where(S > 0.0, 1.0 / S, jnp.nan)
-    if m == 2:
-        a, b, d = S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1]
-        det = a * d - b * b
-        det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
-        return jnp.array([[d / det, -b / det], [-b / det, a / det]])
-    return small_linalg.spd_inverse(S)                              # NaN where not PD
-
-
 def innovation_nis(P_pred: jax.Array, e: jax.Array, H: jax.Array, R: jax.Array) -> jax.Array:
     """``eᵀ S⁻¹ e``, ``S = H P⁻ Hᵀ + R`` symmetrised
     (:func:`fir_gym.estimators._consistency.innovation_nis`); NaN where ``S`` is not PD."""
     S = symmetrize(H @ P_pred @ H.T + R)
-    return jnp.einsum("i,ij,j->", e, spd_inverse(S), e)
+    return jnp.einsum("i,ij,j->", e, small_linalg.spd_inverse(S), e)
 
 
 # ---------------------------------------------------------------------------- the filter

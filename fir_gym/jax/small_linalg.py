@@ -139,9 +139,20 @@ def cho_solve(L: jax.Array, B: jax.Array) -> jax.Array:
 
 
 def spd_inverse(S: jax.Array) -> jax.Array:
-    """``S⁻¹`` of a symmetric positive-definite ``S`` by Cholesky solves against ``I``; NaN
-    where ``S`` is not positive definite."""
-    return cho_solve(cholesky(S), jnp.eye(S.shape[0], dtype=S.dtype))
+    """``S⁻¹`` of a symmetric ``S``, NaN where it is not positive definite — as
+    :func:`fir_gym.estimators._kalman_linalg.spd_inverse` computes it: ``1/S`` for one
+    channel, Cramer's rule with the test ``s₁₁ > 0, det > 0`` for two, Cholesky solves
+    against ``I`` beyond."""
+    m = S.shape[0]
+    if m == 1:
+        return jnp.where(S > 0.0, 1.0 / S, jnp.nan)
+    if m == 2:
+        a, b, d = S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1]
+        det = a * d - b * b
+        det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
+        off = -b / det
+        return jnp.array([[d / det, off], [off, a / det]])
+    return cho_solve(cholesky(S), jnp.eye(m, dtype=S.dtype))
 
 
 # ---------------------------------------------------------------------------- LU

@@ -125,22 +125,6 @@ def sigma_points(x: jax.Array, P: jax.Array, weights: SigmaWeights) -> jax.Array
     return x[None, :] + (S @ jnp.asarray(weights.xi).T).T
 
 
-def spd_inverse(S: jax.Array) -> jax.Array:
-    """``S⁻¹`` of a symmetric ``S``, NaN where it is not positive definite
-    (:func:`fir_gym.estimators._kalman_linalg.spd_inverse`): ``1/S`` for one channel,
-    Cramer's rule with the test ``s₁₁ > 0, det > 0`` for two, Cholesky solves beyond."""
-    m = S.shape[0]
-    if m == 1:
-        return jnp.where(S > 0.0, 1.0 / S, jnp.nan)
-    if m == 2:
-        a, b, d = S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1]
-        det = a * d - b * b
-        det = jnp.where((a > 0.0) & (det > 0.0), det, jnp.nan)
-        off = -b / det
-        return jnp.array([[d / det, off], [off, a / det]])
-    return small_linalg.spd_inverse(S)               # NaN where S is not PD
-
-
 def psd_factor(P: jax.Array) -> jax.Array:
     """A factor ``L Lᵀ = P`` of a symmetric ``P`` that is PSD up to round-off, else of its
     nearest PSD matrix (:func:`fir_gym.estimators._kalman_linalg.psd_factor`; Higham 2002,
@@ -229,7 +213,7 @@ def ukf_correct(x: jax.Array, P: jax.Array, X: jax.Array, y: jax.Array, model: F
     S = symmetrize(_cross(DZ, dz, cz, DZ, dz, cz, weights))
     Pxz = _cross(DX, dx, cx, DZ, dz, cz, weights)
     S = S + model.R
-    W = spd_inverse(S)
+    W = small_linalg.spd_inverse(S)
     K = Pxz @ W
     e = y - y_hat
     x_new = x + K @ e

@@ -25,13 +25,11 @@ pytest.importorskip("rejax")
 pytest.importorskip("yaml")
 
 import jax
+from jax_runs import ORBIT, TINY
 
 from fir_gym.jax import train as jt
 from fir_gym.jax.benchmark import numpy_returns, play_in_numpy_env
 
-ORBIT = "fir_gym/Orbit-v0"
-#: two PPO iterations of the shipped rollout (16 envs x 256 steps)
-TINY: dict[str, Any] = {"steps": 8192, "checkpoints": 2, "curve_episodes": 2, "episodes": 2}
 #: a plant option the run must keep: shorter episodes (also quicker to play)
 PLANT = {"max_episode_steps": 300}
 #: (kind, its options)

@@ -13,15 +13,18 @@ from __future__ import annotations
 
 import re
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
 
-import fir_gym.jax  # noqa: F401  (float64)
-from fir_gym.jax import small_linalg as sl
-from fir_gym.jax.registry import PLANTS, make
+jax = pytest.importorskip("jax")
+pytest.importorskip("gymnax")
+
+import jax.numpy as jnp  # noqa: E402
+
+import fir_gym.jax  # noqa: E402, F401  (float64)
+from fir_gym.jax import small_linalg as sl  # noqa: E402
+from fir_gym.jax.registry import PLANTS, make  # noqa: E402
 
 EPS = float(np.finfo(np.float64).eps)
 SIZES = (1, 2, 3, 4)

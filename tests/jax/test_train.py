@@ -21,13 +21,10 @@ pytest.importorskip("yaml")
 
 import jax
 import jax.numpy as jnp
+from jax_runs import ORBIT, TINY
 
 from fir_gym.jax import Orbit
 from fir_gym.jax import train as jt
-
-ORBIT = "fir_gym/Orbit-v0"
-#: two PPO iterations of the shipped rollout (16 envs x 256 steps)
-TINY: dict[str, Any] = {"steps": 8192, "checkpoints": 2, "curve_episodes": 2, "episodes": 2}
 
 
 @pytest.fixture(scope="module")
