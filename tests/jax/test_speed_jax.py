@@ -11,7 +11,7 @@ pytest.importorskip("jax")
 pytest.importorskip("gymnax")
 pytest.importorskip("rejax")
 
-from fir_gym.benchmarks import jax_training  # noqa: E402
+from fir_gym.benchmarks import jax_training
 
 
 @pytest.mark.parametrize("free", [False, True])
