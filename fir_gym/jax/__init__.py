@@ -22,6 +22,14 @@ paper 000, simulation 2), :class:`fir_gym.jax.carrier_motion.CarrierMotion`
 (``fir_gym/VanDerPol-v0``, paper 002) and :class:`fir_gym.jax.pendulum_slider.PendulumSlider`
 (``fir_gym/PendulumSlider-v0``: the slider's analytic equations of motion, integrated as
 the numpy plant's MuJoCo scene is, RK4 at 1 ms). Each module's docstring states its noise contract.
+
+Kinds (what the controller observes; ``kind_kwargs`` carries a kind's options): ``true``,
+``measurement``, ``measurement-stack`` (:mod:`fir_gym.jax.measurement_stack`), the plant's
+own filter run inside its step (``ekf``; ``kf`` on CarrierMotion-v0), and the generic filters
+of :mod:`fir_gym.jax.filters` run on the plant's ``filter_model`` — ``ukf``
+(:mod:`fir_gym.jax.unscented`) and ``efir`` (``fir`` on CarrierMotion-v0;
+:mod:`fir_gym.jax.fir`). Training: :mod:`fir_gym.jax.train` (``train``, ``save``, ``load``);
+the benchmark beside stable-baselines3: :mod:`fir_gym.jax.benchmark`.
 """
 
 from __future__ import annotations
