@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnax.environments.environment as gymnax_env
@@ -14,7 +12,10 @@ from flax import struct
 from gymnax.environments import spaces
 
 from ._x64 import require_x64
+from .filter_model import FilterModel
+from .filters import GENERIC_FILTERS
 from .kalman import Belief, WatchLimits, watch
+from .measurement_stack import stack_observation, stack_push, stack_start
 
 #: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`; PendulumSlider-v0
 #: has its own)
@@ -27,27 +28,6 @@ SIMULATION_FAILURES = ("nonfinite_state", "state_overflow", "nonfinite_observati
                        "nonfinite_reward")
 #: the prior floor of :mod:`fir_gym.wrappers.estimator_observation` (``PRIOR_FLOOR``)
 PRIOR_FLOOR = 1e-9
-
-
-@dataclass(frozen=True)
-class FilterModel:
-    """What a filter believes about a plant, as pure JAX functions of one system (the
-    :class:`fir_gym.estimators.model.StateSpaceModel` a numpy plant publishes as ``model``,
-    built from the params' ``nominal_*`` fields inside the traced step):
-
-    * ``f(x, u)``: the model's state after one env step from ``x`` under the applied (clipped)
-      action ``u`` (shape ``(1,)``), no noise;
-    * ``f_and_F(x, u)``: ``f`` and its Jacobian ``∂f/∂x`` at ``x``;
-    * ``H``: the measurement matrix (every fir-gym plant measures linearly, ``y = H x + v``);
-    * ``Q``: the process noise covariance the model adds per step (``G Q Gᵀ``), ``n_x × n_x``;
-    * ``R``: the measurement noise covariance, ``n_y × n_y``.
-    """
-
-    f: Callable[[jax.Array, jax.Array], jax.Array]
-    f_and_F: Callable[[jax.Array, jax.Array], tuple[jax.Array, jax.Array]]
-    H: jax.Array
-    Q: jax.Array
-    R: jax.Array
 
 
 def psd_sqrt(M: jax.Array) -> jax.Array:
@@ -141,8 +121,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
     def __init__(self, kind: str | None = None, observation: str = "estimate",
                  **options: Any) -> None:
-        from .filters import GENERIC_FILTERS
-
         super().__init__()
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
@@ -180,8 +158,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     @property
     def filter_kinds(self) -> tuple[str, ...]:
         """The kinds of :attr:`kinds` that run a filter (the plant's own and the generic)."""
-        from .filters import GENERIC_FILTERS
-
         return tuple(k for k in self.kinds if k == self.estimator or k in GENERIC_FILTERS)
 
     def filter_model(self, params: Any) -> FilterModel:
@@ -193,8 +169,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return 1
 
     def get_obs(self, state: Any, params: Any = None, key: jax.Array | None = None) -> Any:
-        from .measurement_stack import stack_observation
-
         if self.kind == "true":
             return state.x
         if self.kind == "measurement":
@@ -234,9 +208,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         """A reset's state after the plant's own part: the stack's windows started, or a
         generic filter's first update with ``y[0]`` from its prior (the state's filter
         fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`)."""
-        from .filters import GENERIC_FILTERS
-        from .measurement_stack import stack_start
-
         if self.kind == "measurement-stack":
             return state.replace(memory=stack_start(state.y, self.options["horizon"]))
         if self.kind in GENERIC_FILTERS:
@@ -255,9 +226,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         already updated): the stack pushed, or a generic filter's step with the applied
         action ``u`` — and for every filter kind the ``info`` keys ``estimate``,
         ``estimation_error``, ``estimator_diverged`` and ``nis``."""
-        from .filters import GENERIC_FILTERS
-        from .measurement_stack import stack_push
-
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
         elif self.kind in GENERIC_FILTERS:

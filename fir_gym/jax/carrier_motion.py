@@ -106,8 +106,9 @@ import numpy as np
 from flax import struct
 
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
-from ._plant import STATE_LIMIT, FilteredPlant, FilterModel, PlantState, filter_prior, watch_state
+from ._plant import STATE_LIMIT, FilteredPlant, PlantState, filter_prior, watch_state
 from ._x64 import require_x64
+from .filter_model import FilterModel
 from .kalman import WatchLimits, kf_predict, kf_update, watch_limits
 
 #: paper 001's sea (Sidar & Doolin): the stiffness and damping terms and the noise input

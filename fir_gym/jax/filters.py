@@ -25,7 +25,7 @@ from typing import Any
 import jax
 
 from . import fir, unscented
-from ._plant import FilterModel
+from .filter_model import FilterModel
 
 #: (memory, x, P, nis) after an update or a step
 Result = tuple[Any, jax.Array, jax.Array, jax.Array]

@@ -87,7 +87,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from . import small_linalg
-from ._plant import FilterModel
+from .filter_model import FilterModel
 from .kalman import symmetrize
 
 #: :data:`fir_gym.estimators._fir_bank.RANK_RTOL`: an information matrix counts as singular

@@ -80,7 +80,6 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
-    FilterModel,
     PlantState,
     filter_prior,
     numpy_sqrt,
@@ -89,6 +88,7 @@ from ._plant import (
     watch_state,
 )
 from ._x64 import require_x64
+from .filter_model import FilterModel
 from .kalman import symmetrize
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)

@@ -111,7 +111,6 @@ from flax import struct
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
 from ._plant import (
     FilteredPlant,
-    FilterModel,
     PlantState,
     belief_of,
     filter_prior,
@@ -121,6 +120,7 @@ from ._plant import (
     with_belief,
 )
 from ._x64 import require_x64
+from .filter_model import FilterModel
 from .kalman import (
     Belief,
     ekf_predict,

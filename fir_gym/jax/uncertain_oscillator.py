@@ -103,7 +103,6 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
-    FilterModel,
     PlantState,
     filter_prior,
     numpy_sqrt,
@@ -112,6 +111,7 @@ from ._plant import (
     watch_state,
 )
 from ._x64 import require_x64
+from .filter_model import FilterModel
 from .kalman import ekf_predict, kf_update_innovation
 
 #: the two readings of eq (29) (``UNCERTAINTY_READINGS`` of the numpy plant)

@@ -67,7 +67,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import small_linalg
-from ._plant import FilterModel
+from .filter_model import FilterModel
 from .kalman import symmetrize
 
 #: relative tolerance below which negative eigenvalues count as round-off (the reference's

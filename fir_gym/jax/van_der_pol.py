@@ -106,7 +106,6 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
-    FilterModel,
     PlantState,
     filter_prior,
     numpy_sqrt,
@@ -115,6 +114,7 @@ from ._plant import (
     watch_state,
 )
 from ._x64 import require_x64
+from .filter_model import FilterModel
 from .kalman import ekf_predict, kf_update_innovation
 
 #: the observation kinds

@@ -14,7 +14,7 @@ to 1e-9 of their largest entry, the NIS to 1e-9 (1 + NIS), the divergence flag e
 The UKF is compared at ``alpha = 1, kappa = 1`` (options both envs take): at its default
 ``alpha = 1e-3`` the weights are ~1/alpha² in size and of mixed sign, so the one-ulp
 differences of XLA's fused multiply-adds in ``f`` grow to ~1e-8 in the estimate — the
-spread the numpy filter's own compiled twin shows against it (docs/jax.md#round-off;
+spread the numpy filter's own compiled twin shows against it (docs/jax.md#the-kinds;
 tests/jax/test_unscented.py checks the default alpha with fusing turned off).
 """
 

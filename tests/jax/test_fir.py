@@ -30,7 +30,7 @@ from fir_gym.estimators.fir import FIRFilter  # noqa: E402
 from fir_gym.estimators.model import LinearModel, StateSpaceModel  # noqa: E402
 from fir_gym.jax import fir as jf  # noqa: E402
 from fir_gym.jax import kalman as jk  # noqa: E402
-from fir_gym.jax._plant import FilterModel  # noqa: E402
+from fir_gym.jax.filter_model import FilterModel  # noqa: E402
 from fir_gym.jax.orbit import orbit_interval  # noqa: E402
 
 RTOL = 1e-9

@@ -51,7 +51,8 @@ from fir_gym.jax import kalman as jk  # noqa: E402
 from fir_gym.jax import orbit as jorbit  # noqa: E402
 from fir_gym.jax import pendulum_slider as jps  # noqa: E402
 from fir_gym.jax import unscented as ju  # noqa: E402
-from fir_gym.jax._plant import FilterModel, filter_prior  # noqa: E402
+from fir_gym.jax._plant import filter_prior  # noqa: E402
+from fir_gym.jax.filter_model import FilterModel  # noqa: E402
 
 RTOL = 1e-9
 STEPS = 400
