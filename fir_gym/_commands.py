@@ -219,13 +219,7 @@ def train_jax(args: argparse.Namespace) -> int:
                                  kind_kwargs=options, checkpoints=checkpoints,
                                  episodes=args.episodes)
     out = jax_train.save(result, args.out)
-    returns = [r for seed in result.final_returns for r in seed]
-    import statistics
-
-    spread = statistics.pstdev(returns) if len(returns) > 1 else 0.0
-    print(f"{args.env} observing {args.estimator}: return {statistics.fmean(returns):.4g} ± "
-          f"{spread:.3g} over {args.episodes} episodes x {len(seeds)} seed(s), IQM over seeds "
-          f"{result.iqm:.4g}; saved in {out}")
+    print(f"{jax_returns_line(args.env, args.estimator, result.final_returns)}; saved in {out}")
     print(f"jax: compile {result.compile_seconds:.1f} s (cache {result.cache}), train "
           f"{result.train_seconds:.1f} s for {result.steps_trained} steps x {len(seeds)} seeds",
           file=sys.stderr)
@@ -274,6 +268,21 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def jax_returns_line(env_id: str, kind: str, returns: list[list[float]]) -> str:
+    """The summary line of a JAX run's ``[seed][episode]`` returns: their mean ± spread over
+    every episode of every seed, and the IQM of the seeds' means (``train`` and ``evaluate``
+    with ``--backend jax`` print it)."""
+    import statistics
+
+    from .training.stats import iqm
+
+    every = [r for seed_returns in returns for r in seed_returns]
+    spread = statistics.pstdev(every) if len(every) > 1 else 0.0
+    return (f"{env_id} observing {kind}: return {statistics.fmean(every):.4g} ± {spread:.3g} "
+            f"over {len(returns[0])} episodes x {len(returns)} seed(s), IQM over seeds "
+            f"{iqm([statistics.fmean(r) for r in returns]):.4g}")
+
+
 def evaluate_jax(args: argparse.Namespace) -> int:
     """``fir-gym evaluate --model RUN`` on a run folder of ``fir-gym train --backend jax``:
     every seed's deterministic policy (:func:`fir_gym.jax.train.load`) played in the numpy
@@ -294,7 +303,6 @@ def evaluate_jax(args: argparse.Namespace) -> int:
     # fir_gym.jax is imported here only, when asked for (tests/jax/test_jax_boundary.py)
     from .jax.benchmark import play_in_numpy_env
     from .jax.train import load
-    from .training.stats import iqm
 
     result = load(args.model)
     with working(f"evaluating {args.episodes} episodes x {len(result.seeds)} seed(s)",
@@ -303,11 +311,7 @@ def evaluate_jax(args: argparse.Namespace) -> int:
     for seed, seed_returns in zip(result.seeds, returns, strict=True):
         print(f"seed {seed}: return {statistics.fmean(seed_returns):.4g} ± "
               f"{statistics.pstdev(seed_returns):.3g} over {args.episodes} episodes")
-    every = [r for seed_returns in returns for r in seed_returns]
-    print(f"{result.env_id} observing {result.kind}: return {statistics.fmean(every):.4g} ± "
-          f"{statistics.pstdev(every):.3g} over {args.episodes} episodes x "
-          f"{len(result.seeds)} seed(s), IQM over seeds "
-          f"{iqm([statistics.fmean(r) for r in returns]):.4g}")
+    print(jax_returns_line(result.env_id, result.kind, returns))
     return 0
 
 

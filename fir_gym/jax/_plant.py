@@ -146,7 +146,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
                 raise ValueError(f"horizon must be a positive integer; got {horizon!r}")
             options["horizon"] = int(horizon)
         if kind in GENERIC_FILTERS:
-            options = GENERIC_FILTERS[kind].check(self.n_x, options)
+            GENERIC_FILTERS[kind].check(self.n_x, options)
         require_x64()
         self.kind, self.observation, self.options = kind, observation, options
 

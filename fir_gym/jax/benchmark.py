@@ -11,7 +11,7 @@ in :data:`fir_gym.jax.registry.PLANTS` — all but ``recurrent`` (and ``ufir``);
 shipped recipe (:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds'
 mean returns and its 95 % interval from the same bootstrap as the SB3 benchmark's
 (:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), on the JAX env's
-own episode draws and on the numpy env's SB3 episodes (:func:`numpy_returns`), the compile
+own episode draws and on the numpy env's SB3 episodes (:func:`play_in_numpy_env`), the compile
 and training times and the training rate. Given an SB3 benchmark (``--compare-with``: its
 folder, or a Markdown file of its tables such as its ``BENCHMARK.md`` or README.md's
 benchmark section), each row stands beside the SB3 row of the same plant and kind, with the
@@ -88,8 +88,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
         save(result, out / job["env_id"].split("/")[-1] / job["kind"])
         rows.append({"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
                      "episode_returns": result.final_returns,
-                     "numpy_returns": numpy_returns(result, job["env_kwargs"],
-                                                    job["episodes"]),
+                     "numpy_returns": play_in_numpy_env(result, job["episodes"]),
                      "compile_seconds": result.compile_seconds,
                      "train_seconds": result.train_seconds,
                      "steps_trained": result.steps_trained,
@@ -104,23 +103,16 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
     return report
 
 
-def numpy_returns(result: Any, env_kwargs: dict[str, Any], episodes: int,
-                  seed: int = EVAL_SEED) -> list[list[float]]:
-    """:func:`play_in_numpy_env` on the plant built with ``env_kwargs`` (the benchmark job's,
-    which :func:`fir_gym.jax.train.train` also records in ``result.env_kwargs``)."""
-    return play_in_numpy_env(result, episodes, seed, env_kwargs=env_kwargs)
-
-
-def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED, *,
-                      env_kwargs: dict[str, Any] | None = None) -> list[list[float]]:
+def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
+                      ) -> list[list[float]]:
     """Each trained seed's deterministic policy played in the *numpy* env (``make_single_env``,
     as ``fir-gym evaluate`` and the SB3 benchmark build it) on the SB3 evaluation's episodes
     (episode ``i`` from ``reset(seed=seed + i)``): ``[seed][episode]`` raw returns.
 
     ``result``: a :class:`fir_gym.jax.train.JaxTraining` with its train state — just trained
     (:func:`fir_gym.jax.train.train`) or read from a run folder
-    (:func:`fir_gym.jax.train.load`); the plant's keywords are ``result.env_kwargs`` unless
-    ``env_kwargs`` is given, the kind's options ``result.kind_kwargs``. The policy acts on
+    (:func:`fir_gym.jax.train.load`); the plant's keywords are ``result.env_kwargs``, the
+    kind's options ``result.kind_kwargs``. The policy acts on
     the observation through the run's final normalisation statistics, its Gaussian's mean
     clipped to the action box (:meth:`fir_gym.jax.train.Policy.mean_action`). The JAX and
     the numpy plants agree given the same noise (the parity tests), so these returns differ
@@ -137,7 +129,7 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED, *,
     if ts is None:
         raise ValueError(f"{result.env_id} {result.kind}: the result has no train state (a "
                          "run folder's policies are read by fir_gym.jax.train.load)")
-    plant = dict(result.env_kwargs if env_kwargs is None else env_kwargs)
+    plant = dict(result.env_kwargs)
     env_j, params = make_env(result.env_id, result.kind, plant, result.kind_kwargs)
     algo = make_algorithm(env_j, params, result.recipe)
 

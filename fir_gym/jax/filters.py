@@ -48,38 +48,35 @@ class FilterKind:
     predict_update: Callable[[Any, jax.Array, jax.Array, jax.Array, jax.Array, FilterModel,
                               Mapping[str, Any]], Result]
 
-    def check(self, n_x: int, options: Mapping[str, Any]) -> dict[str, Any]:
-        """The options with defaults filled in; ValueError naming an unknown or bad one."""
-        unknown = sorted(set(options) - set(self.options))
-        if unknown:
-            raise ValueError(f"unknown option(s) {unknown}; the options of this kind are "
-                             f"{sorted(self.options) or 'none'}")
-        full = {**self.options, **options}
-        if "alpha" in full:
-            unscented.merwe_weights(n_x, float(full["alpha"]), float(full["beta"]),
-                                    float(full["kappa"]))
-        return full
+    def check(self, n_x: int, options: Mapping[str, Any]) -> None:
+        """ValueError naming a bad option value (the names and defaults are the env's
+        business, :class:`~fir_gym.jax._plant.FilteredPlant`)."""
+        if "alpha" in options:
+            _weights(n_x, options)
 
 
-def _weights(x: jax.Array, options: Mapping[str, Any]) -> unscented.SigmaWeights:
-    return unscented.merwe_weights(x.shape[-1], float(options["alpha"]),
-                                   float(options["beta"]), float(options["kappa"]))
+def _weights(n: int, options: Mapping[str, Any]) -> unscented.SigmaWeights:
+    return unscented.merwe_weights(n, float(options["alpha"]), float(options["beta"]),
+                                   float(options["kappa"]))
 
 
 def _ukf_update(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, model: FilterModel,
                 options: Mapping[str, Any]) -> Result:
-    return (memory, *unscented.ukf_update(x, P, y, model, _weights(x, options)))
+    return (memory, *unscented.ukf_update(x, P, y, model, _weights(x.shape[-1], options)))
 
 
 def _ukf_step(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array,
               model: FilterModel, options: Mapping[str, Any]) -> Result:
-    return (memory, *unscented.ukf_predict_update(x, P, y, u, model, _weights(x, options)))
+    return (memory, *unscented.ukf_predict_update(x, P, y, u, model,
+                                                      _weights(x.shape[-1], options)))
 
 
 UKF = FilterKind(
     options={"alpha": 1e-3, "beta": 2.0, "kappa": 0.0},
     start=lambda x0, P0, options: (),
     update=_ukf_update, predict_update=_ukf_step)
+
+
 def _windowed(start: Callable[..., Any], update: Callable[..., Result],
               predict_update: Callable[..., Result]) -> FilterKind:
     """A FIR-family filter of :mod:`fir_gym.jax.fir`: one option, ``horizon`` (the bank's

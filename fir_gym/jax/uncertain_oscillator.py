@@ -489,18 +489,8 @@ class UncertainOscillator(FilteredPlant):
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure, "delta": delta}
         if self.kind == "ekf":
-            def f_and_F(xf: jax.Array, uf: jax.Array) -> tuple[jax.Array, jax.Array]:
-                """The nominal model (δ = 0) and its Jacobian at ``xf``."""
-                return (oscillator_step(xf, uf, 0.0, params.nominal_stiffness,
-                                        params.nominal_damping_gain, params.nominal_drive,
-                                        params.nominal_u_max, params.nominal_dt,
-                                        params.uncertainty),
-                        oscillator_jacobian(xf, params.nominal_stiffness,
-                                            params.nominal_damping_gain, params.nominal_dt,
-                                            params.uncertainty))
-
-            xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model_process_cov(params),
-                                 f_and_F)
+            model = self.filter_model(params)
+            xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model.Q, model.f_and_F)
             new = ekf_update(new, xp, Pp, y, params)
         obs, new, info = self.finish_step(state, new, u, params, info)
         return obs, new, reward, terminated, info

@@ -28,7 +28,7 @@ import jax
 from jax_runs import ORBIT, TINY
 
 from fir_gym.jax import train as jt
-from fir_gym.jax.benchmark import numpy_returns, play_in_numpy_env
+from fir_gym.jax.benchmark import play_in_numpy_env
 
 #: a plant option the run must keep: shorter episodes (also quicker to play)
 PLANT = {"max_episode_steps": 300}
@@ -124,8 +124,8 @@ def test_a_loaded_run_plays_exactly_as_the_trained_one(run: tuple[jt.JaxTraining
     assert np.shape(played) == (2, 2) and np.all(np.isfinite(played))
     assert played[0] != played[1]                                  # two policies
     assert play_in_numpy_env(jt.load(folder), 2) == played
-    # the benchmark's entry point: the same loop, the plant's keywords given
-    assert numpy_returns(result, PLANT, 2) == played
+    # the benchmark's entry point: the same loop on the plant's keywords the run recorded
+    assert result.env_kwargs == PLANT and play_in_numpy_env(result, 2) == played
 
 
 def test_a_folder_without_the_keywords_reads_them_as_empty(run: tuple[jt.JaxTraining, Path],
