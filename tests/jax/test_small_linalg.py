@@ -277,9 +277,59 @@ def test_batches_under_vmap_and_jit(n: int) -> None:
 
 def test_no_lapack_in_the_functions_themselves() -> None:
     x = jnp.eye(4)
-    for f in (sl.cholesky, sl.spd_inverse, sl.inv, sl.det, sl.eigh, sl.eigvalsh,
+    for f in (sl.cholesky, sl.spd_inverse, sl.inv, sl.det, sl.eigh, sl.eigvalsh, sl.expm,
               lambda A: sl.solve(A, A[0]), lambda A: sl.cho_solve(A, A)):
         assert "lapack" not in jax.jit(jax.vmap(f)).lower(jnp.stack([x] * 8)).as_text()
+
+
+# ---------------------------------------------------------------------------- expm
+@pytest.mark.parametrize("n", SIZES)
+@pytest.mark.parametrize("scale", [1e-3, 0.3, 1.0, 4.0, 20.0])
+def test_expm_of_a_symmetric_matrix_is_its_closed_form(n: int, scale: float) -> None:
+    """``e^{V D Vᵀ} = V e^D Vᵀ`` for orthogonal ``V``: the closed form, exact up to the
+    rounding of ``V`` and ``e^D``. Both sides are computed in ``float64``; a backward-stable
+    result differs by ``O(n ε ‖M‖ e^{λ_max})`` (Moler & Van Loan 2003, §3: the squarings'
+    error grows with ``‖M‖``), bounded here by ``γ_{8n} (1 + ‖M‖) 2^s`` relative to the
+    largest entry, ``s`` the squarings."""
+    rng = np.random.default_rng(n + int(scale * 1000))
+    for _ in range(20):
+        V = _orthogonal(rng, n)
+        d = scale * rng.standard_normal(n)
+        M = (V * d) @ V.T
+        exact = (V * np.exp(d)) @ V.T
+        got = np.asarray(jax.jit(sl.expm)(jnp.asarray(M)))
+        squarings = max(0.0, np.ceil(np.log2(np.abs(M).sum(axis=1).max() / sl.EXPM_NORM)))
+        bound = gamma(8 * n) * (1 + np.abs(d).max()) * 2.0 ** squarings
+        assert np.abs(got - exact).max() <= bound * np.abs(exact).max()
+
+
+@pytest.mark.parametrize("n", SIZES)
+def test_expm_matches_scipy_and_its_properties(n: int) -> None:
+    """Against :func:`scipy.linalg.expm` (Al-Mohy & Higham's Padé method) on general
+    matrices of norm up to 1, where both are accurate to a few ulps (the bound: twice one
+    method's ``γ_{8n}``, relative to the largest entry), and two properties that hold for
+    any ``M``: ``e^M e^{−M} = I`` and ``e^{M} = (e^{M/2})²``."""
+    rng = np.random.default_rng(100 + n)
+    f = jax.jit(sl.expm)
+    for _ in range(50):
+        M = rng.standard_normal((n, n))
+        M *= rng.uniform(0.0, 1.0) / np.abs(M).sum(axis=1).max()
+        got, ref = np.asarray(f(jnp.asarray(M))), scipy.linalg.expm(M)
+        assert np.abs(got - ref).max() <= 2 * gamma(8 * n) * np.abs(ref).max()
+        back = got @ np.asarray(f(jnp.asarray(-M)))
+        assert np.abs(back - np.eye(n)).max() <= 4 * gamma(8 * n)
+        half = np.asarray(f(jnp.asarray(M / 2)))
+        assert np.abs(half @ half - got).max() <= 4 * gamma(8 * n) * np.abs(got).max()
+
+
+def test_expm_of_a_rotation_generator_and_of_nan() -> None:
+    """``exp([[0, −θ], [θ, 0]])`` is the rotation by ``θ``, within ``γ_16 (1 + θ) 2¹²`` (θ =
+    1000 takes 11 squarings); a non-finite matrix gives NaN."""
+    for theta in (0.1, 2.0, 1000.0):
+        R = np.asarray(sl.expm(jnp.array([[0.0, -theta], [theta, 0.0]])))
+        c, s_ = np.cos(theta), np.sin(theta)
+        assert np.abs(R - np.array([[c, -s_], [s_, c]])).max() <= gamma(16) * (1 + theta) * 4096
+    assert np.all(np.isnan(np.asarray(sl.expm(jnp.array([[np.inf, 0.0], [0.0, 1.0]])))))
 
 
 # ---------------------------------------------------------------------------- acceptance
