@@ -21,16 +21,26 @@ rejax clips each gradient *element* with ``optax.clip``), Adam's ``eps = 1e-5`` 
 an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), SB3's orthogonal
 initialisation (gains √2, 0.01 for the mean, 1 for the value; rejax: flax's LeCun normal,
 which starts the mean action far from 0), the value loss
-unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``) and observations
+unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``), observations
 (and rewards) normalised then clipped to ``±clip_obs`` (``±clip_reward``) as
-``VecNormalize`` does.
+``VecNormalize`` does, and the bootstrap of episodes cut by the time limit
+(:meth:`SB3LikePPO.collect_trajectories`; rejax ends the return there): SB3's
+``OnPolicyAlgorithm.collect_rollouts`` adds ``γ V(terminal observation)`` to the normalised
+reward of a step that is ``TimeLimit.truncated`` (truncated and not terminated), the terminal
+observation normalised as ``VecNormalize.step_wait`` does (with the statistics after that
+step's update); gymnax 1.0's ``info["final_observation"]``, ``info["truncated"]`` and
+``info["terminated"]`` give the same here.
 
 **What still differs from stable-baselines3** (:data:`UNMATCHED`): separate Adam states and
 separate gradient-norm clips for the actor and the critic (SB3: one optimiser over one
-summed loss; with separate networks only the clip differs); no bootstrap of truncated
-episodes (SB3's PPO adds ``γ V(final obs)`` at a time limit; gymnax's ``done`` ends the
-return there — at γ = 0.99 over 1000-step episodes a small effect); the minibatches must divide the
-rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one).
+summed loss; with separate networks only the clip differs); the minibatches must divide the
+rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one). Two
+differences of rejax's normalisation, one step of a long rollout each and so left as they
+are: the running discounted return behind the reward statistics restarts at an episode's
+last step (rejax's ``update_rew_rms``: ``r + (1 − done) γ R``), where ``VecNormalize``
+(``_update_reward``, then ``returns[dones] = 0``) restarts it one step later; and the first
+observations of training are neither counted in the statistics nor normalised (SB3's
+``VecNormalize.reset`` does both).
 
 **Returns** are what :func:`fir_gym.training.evaluate` reports: the undiscounted sum of the
 plant's raw reward over whole episodes, the policy deterministic (the Gaussian's mean,
@@ -65,6 +75,7 @@ from flax.training.train_state import TrainState  # noqa: E402
 from rejax import PPO  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
+from rejax.algos.ppo import Trajectory  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
 from .registry import PLANTS, kinds_line, make  # noqa: E402  (after fir_gym.jax: x64 on)
@@ -75,7 +86,10 @@ SUPPORTED: dict[str, tuple[str, ...]] = {env_id: p.kinds for env_id, p in PLANTS
 UNMATCHED = (
     "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
     "optimiser, one clip over both)",
-    "no bootstrap of truncated episodes (SB3 adds gamma V(final obs) at the time limit)",
+    "reward statistics: the running return restarts at an episode's last step (VecNormalize: "
+    "one step later)",
+    "the first observations of training: not counted in the statistics, not normalised "
+    "(VecNormalize's reset does both)",
 )
 #: the algorithm settings the translation understands (stable-baselines3's PPO names)
 KNOWN_ALGO_KWARGS = ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma",
@@ -323,6 +337,68 @@ class SB3LikePPO(PPO):
     def normalize_rew(self, rms_state: Any, r: Any) -> Any:
         return jnp.clip(super().normalize_rew(rms_state, r), -self.clip_reward,
                         self.clip_reward)
+
+    def truncation_bootstrap(self, ts: Any, info: dict[str, Any], obs_rms_state: Any
+                             ) -> Any:
+        """What stable-baselines3's PPO adds to a step's (normalised) reward: ``γ V(final
+        obs)`` where the episode ended by its time limit and not by termination, else 0.
+
+        SB3's ``OnPolicyAlgorithm.collect_rollouts`` ("Handle timeout by bootstrapping with
+        value function") adds ``gamma * predict_values(terminal_observation)`` where a step
+        is ``done`` with ``infos["TimeLimit.truncated"]`` (``DummyVecEnv.step_wait``:
+        ``truncated and not terminated``), the value of the rollout's policy (the critic
+        before this iteration's update). The terminal observation is normalised as
+        ``VecNormalize.step_wait`` normalises ``infos["terminal_observation"]``: with the
+        observation statistics *after* that step's update (an update by the step's returned
+        observations, which at a reset are the next episode's first, never the terminal
+        one), then clipped. gymnax 1.0's ``step`` returns the terminal observation as
+        ``info["final_observation"]`` and the flags as ``info["truncated"]`` and
+        ``info["terminated"]``; ``obs_rms_state`` is the statistics after the step's update.
+        """
+        final = info["final_observation"].astype(float)   # as rejax's FloatObsWrapper
+        if self.normalize_observations:
+            final = self.normalize_obs(obs_rms_state, final)
+        by_time_limit = info["truncated"] & ~info["terminated"]
+        value = self.critic.apply(ts.critic_ts.params, final)
+        return jnp.where(by_time_limit, self.gamma * value, 0.0)
+
+    def collect_trajectories(self, ts: Any) -> Any:
+        """rejax's ``PPO.collect_trajectories`` with stable-baselines3's bootstrap of episodes
+        cut by the time limit (:meth:`truncation_bootstrap`) added to the normalised reward,
+        as ``OnPolicyAlgorithm.collect_rollouts`` adds it before ``rollout_buffer.add``; the
+        rest is rejax's, line for line (the ``done`` of a truncation still ends the return
+        in :meth:`calculate_gae`, as SB3's ``episode_starts`` do)."""
+        def env_step(ts: Any, unused: Any) -> Any:
+            rng, new_rng = jax.random.split(ts.rng)
+            ts = ts.replace(rng=rng)
+            rng_steps, rng_action = jax.random.split(new_rng, 2)
+            rng_steps = jax.random.split(rng_steps, self.num_envs)
+
+            unclipped_action, log_prob = self.actor.apply(
+                ts.actor_ts.params, ts.last_obs, rng_action, method="action_log_prob")
+            value = self.critic.apply(ts.critic_ts.params, ts.last_obs)
+            space = self.env.action_space(self.env_params)
+            action = jnp.clip(unclipped_action, space.low, space.high)
+
+            next_obs, env_state, reward, done, info = self.vmap_step(
+                rng_steps, ts.env_state, action, self.env_params)
+            if self.normalize_observations:
+                obs_rms_state, next_obs = self.update_and_normalize_obs(ts.obs_rms_state,
+                                                                        next_obs)
+                ts = ts.replace(obs_rms_state=obs_rms_state)
+            if self.normalize_rewards:
+                rew_rms_state, reward = self.update_and_normalize_rew(ts.rew_rms_state,
+                                                                      reward, done)
+                ts = ts.replace(rew_rms_state=rew_rms_state)
+            reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
+
+            transition = Trajectory(ts.last_obs, unclipped_action, log_prob, reward, value,
+                                    done)
+            ts = ts.replace(env_state=env_state, last_obs=next_obs, last_done=done,
+                            global_step=ts.global_step + self.num_envs)
+            return ts, transition
+
+        return jax.lax.scan(env_step, ts, None, self.num_steps)
 
     def update_critic(self, ts: Any, batch: Any) -> Any:
         def loss(params: Any) -> Any:        # SB3: vf_coef * mse, no value clipping
