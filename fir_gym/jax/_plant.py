@@ -118,6 +118,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     n_x: ClassVar[int]
     n_y: ClassVar[int]
     default_horizon: ClassVar[int] = 10
+    #: the parameters of the truth the ``mismatch`` condition draws per episode (the numpy
+    #: plant's ``randomizable``, same names; :class:`fir_gym.jax.randomized.Randomized`)
+    randomizable: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, kind: str | None = None, observation: str = "estimate",
                  **options: Any) -> None:
@@ -163,6 +166,19 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     def filter_model(self, params: Any) -> FilterModel:
         """What the filters believe (the numpy plant's ``model``) under ``params``."""
         raise NotImplementedError(f"{type(self).__name__} has no filter_model")
+
+    def draw_centres(self, params: Any) -> dict[str, jax.Array]:
+        """The centres of the ``mismatch`` draws: the model's values of the
+        :attr:`randomizable` parameters (its ``nominal_*`` fields; the numpy plant's
+        ``nominal_params``, around which ``randomize`` draws the truth)."""
+        return {name: jnp.asarray(getattr(params, "nominal_" + name), dtype=jnp.float64)
+                for name in self.randomizable}
+
+    def with_true_values(self, params: Any, values: dict[str, Any]) -> Any:
+        """``params`` with the truth's :attr:`randomizable` parameters set to ``values`` and
+        whatever the truth derives from them rebuilt; the model's (``nominal_*``) untouched
+        (the numpy plant's ``_apply_params``). Traceable: ``values`` may be traced."""
+        return params.replace(**values)
 
     @property
     def num_actions(self) -> int:

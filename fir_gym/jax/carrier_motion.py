@@ -132,7 +132,11 @@ class CarrierMotionParams(gymnax_env.EnvParams):
     Build one with :func:`carrier_motion_params` (the numpy env's keywords; it samples the
     continuous model and validates). ``A_d``, ``process_sqrt`` (``psd_sqrt(Q_d)``), ``C``
     and ``measurement_std`` (``√(V/T)``) are the truth's, ``sigma1`` the reward's normaliser,
-    ``nominal_*`` the KF's model (``Q_d`` as ``G Q Gᵀ``, ``R`` as a 1x1 matrix).
+    ``nominal_*`` the KF's model (``Q_d`` as ``G Q Gᵀ``, ``R`` as a 1x1 matrix). ``a21``,
+    ``a22``, ``delta22``, ``sample_period``, ``q`` and ``noise_input`` are the truth's
+    continuous parameters, from which :meth:`CarrierMotion.with_true_values` samples ``A_d``
+    and ``process_sqrt`` again when the ``mismatch`` condition draws ``a21`` and ``a22``
+    around the model's ``nominal_a21``, ``nominal_a22``.
     """
 
     A_d: Any
@@ -151,6 +155,14 @@ class CarrierMotionParams(gymnax_env.EnvParams):
     nominal_C: Any
     nominal_R: Any
     watch: WatchLimits = struct.field(default_factory=WatchLimits)
+    a21: Any = PAPER_A21
+    a22: Any = PAPER_A22
+    delta22: Any = 0.0
+    sample_period: Any = 0.1
+    q: Any = 0.035
+    noise_input: Any = struct.field(default_factory=lambda: jnp.asarray(PAPER_NOISE_INPUT))
+    nominal_a21: Any = PAPER_A21
+    nominal_a22: Any = PAPER_A22
 
 
 @struct.dataclass
@@ -264,7 +276,10 @@ def carrier_motion_params(
         initial_sqrt=jnp.asarray(psd_sqrt(P0)), nominal_A_d=jnp.asarray(nominal_A_d),
         nominal_Q_d=jnp.asarray(nominal_Q_d),     # the model's G Q Gᵀ: G = I, exactly Q_d
         nominal_C=jnp.asarray(nominal_C), nominal_R=jnp.asarray([[float(nominal_R)]]),
-        watch=limits)
+        watch=limits, a21=truth["a21"], a22=truth["a22"], delta22=truth["delta22"],
+        sample_period=truth["sample_period"], q=truth["q"],
+        noise_input=jnp.asarray(truth["noise_input"]), nominal_a21=believed["a21"],
+        nominal_a22=believed["a22"])
 
 
 def _real(name: str, value: Any) -> float:
@@ -301,6 +316,26 @@ def carrier_motion_noise(key: jax.Array, params: CarrierMotionParams) -> Carrier
 
 
 # ---------------------------------------------------------------------------- the environment
+def sampled_truth(params: CarrierMotionParams) -> tuple[jax.Array, jax.Array]:
+    """``(A_d, Q_d)`` of the true continuous model in ``params`` —
+    :func:`fir_gym.envs.carrier_motion.carrier_discrete` traced: ``A = [[0, 1], [a21, a22 +
+    Δ22]]``, ``A_d = e^{A T}``, and ``Q_d = ∫₀ᵀ e^{As} g q gᵀ e^{Aᵀs} ds`` from one exponential
+    of Van Loan's block ``[[−A, g q gᵀ], [0, Aᵀ]] T`` (:func:`fir_gym.estimators.discretize.
+    integrated_noise`, whose scaling of a ``W`` above 1 this mirrors), with
+    :func:`~fir_gym.jax.small_linalg.expm`."""
+    from .small_linalg import expm
+
+    A = jnp.array([[0.0, 1.0], [params.a21, params.a22 + params.delta22]], dtype=jnp.float64)
+    g = jnp.reshape(jnp.asarray(params.noise_input, dtype=jnp.float64), (2, 1))
+    W = params.q * (g @ g.T)
+    scale = jnp.maximum(1.0, jnp.max(jnp.abs(W)))
+    T = params.sample_period
+    block = jnp.block([[-A, W / scale], [jnp.zeros((2, 2)), A.T]])
+    V = expm(block * T)
+    Q_d = V[2:, 2:].T @ V[:2, 2:]
+    return expm(A * T), scale * 0.5 * (Q_d + Q_d.T)
+
+
 class CarrierMotion(FilteredPlant):
     """``fir_gym/CarrierMotion-v0`` as a gymnax environment observing ``kind`` (see the module
     docstring): ``"true"``, ``"measurement"`` or ``"kf"`` (the default, observing
@@ -317,6 +352,7 @@ class CarrierMotion(FilteredPlant):
     """
 
     kinds = KINDS
+    randomizable = ("a21", "a22")
     estimator = "kf"
     default_horizon = 50
     n_x, n_y = 2, 1
@@ -339,6 +375,21 @@ class CarrierMotion(FilteredPlant):
             return params.nominal_A_d @ x, params.nominal_A_d
 
         return FilterModel(f, f_and_F, params.nominal_C, params.nominal_Q_d, params.nominal_R)
+
+    def draw_centres(self, params: CarrierMotionParams) -> dict[str, jax.Array]:
+        return {"a21": jnp.asarray(params.nominal_a21, dtype=jnp.float64),
+                "a22": jnp.asarray(params.nominal_a22, dtype=jnp.float64)}
+
+    def with_true_values(self, params: CarrierMotionParams, values: dict[str, Any]
+                         ) -> CarrierMotionParams:
+        """The truth sampled again with ``a21``/``a22`` from ``values`` (the numpy plant's
+        ``_apply_params``): ``A_d = e^{A T}`` and ``Q_d`` by Van Loan's method
+        (:func:`sampled_truth`), its square root by :func:`~fir_gym.jax._plant.psd_sqrt`."""
+        from ._plant import psd_sqrt
+
+        params = params.replace(**values)
+        A_d, Q_d = sampled_truth(params)
+        return params.replace(A_d=A_d, process_sqrt=psd_sqrt(Q_d))
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams

@@ -329,6 +329,7 @@ class Orbit(FilteredPlant):
     """
 
     kinds = KINDS
+    randomizable = ("mu", "thrust_max")
     estimator = "ekf"
     n_x, n_y = 2, 1
 

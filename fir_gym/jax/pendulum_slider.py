@@ -614,6 +614,7 @@ class PendulumSlider(FilteredPlant):
     """
 
     kinds = KINDS
+    randomizable = ("mu", "M0", "force_max")
     estimator = "ekf"
     default_horizon = 20
     n_x, n_y = 4, 4

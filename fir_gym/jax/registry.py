@@ -55,7 +55,10 @@ def make(env_id: str, kind: str | None = None, *,
     """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's own filter),
     the env built with ``kind_kwargs`` (``observation`` and the kind's options, e.g.
     ``horizon``: :class:`fir_gym.jax._plant.FilteredPlant`) and the params from the numpy
-    env's keywords ``env_kwargs``.
+    env's keywords ``env_kwargs``. Of the numpy plants' condition keywords, ``randomize``
+    (the ``mismatch`` condition: the truth's parameters drawn at every reset) wraps the env
+    in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` is not supported (the params
+    builder refuses it).
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
@@ -67,6 +70,7 @@ def make(env_id: str, kind: str | None = None, *,
     kind = plant.env_class.estimator if kind is None else kind
     if kind not in plant.kinds:
         raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
+    randomize = env_kwargs.pop("randomize", None)
     try:
         params = plant.params(**env_kwargs)
     except TypeError as error:                       # an unknown keyword
@@ -75,4 +79,8 @@ def make(env_id: str, kind: str | None = None, *,
         env = plant.env_class(kind, **(kind_kwargs or {}))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{env_id} kind {kind}: kind_kwargs: {error}") from None
+    if randomize:
+        from .randomized import Randomized
+
+        env = Randomized(env, randomize)
     return env, params

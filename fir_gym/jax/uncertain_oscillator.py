@@ -387,6 +387,7 @@ class UncertainOscillator(FilteredPlant):
     """
 
     kinds = KINDS
+    randomizable = ("stiffness", "damping_gain", "drive", "u_max")
     estimator = "ekf"
     n_x, n_y = 3, 1
 

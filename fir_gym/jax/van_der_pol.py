@@ -462,6 +462,7 @@ class VanDerPol(FilteredPlant):
     """
 
     kinds = KINDS
+    randomizable = ("epsilon", "u_max")
     estimator = "ekf"
     n_x, n_y = 2, 1
 
