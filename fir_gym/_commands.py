@@ -407,14 +407,25 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     conditions = ([c.strip() for c in args.conditions.split(",") if c.strip()]
                   if args.conditions else None)
     check_selection(plants, conditions)              # a bad name fails before any work
+    jax = args.backend == "jax"
+    if jax and (args.jobs or args.scheduler):
+        raise ValueError("--backend jax trains every seed of a plant, kind and regime in one "
+                         "program in this process: it takes no --jobs or --scheduler")
     if not args.lqg_only:
         from ._extras import require
 
-        require("stable_baselines3", "sb3_contrib")
+        if jax:
+            require("jax", "gymnax", "rejax")
+        else:
+            require("stable_baselines3", "sb3_contrib")
+    if jax:
+        args.backend = "serial"                      # the LQG grid's runner
     with _runner(args) as runner:
         report = run_benchmark(out, quick=args.quick, runner=runner, plants=plants,
                                conditions=conditions, seeds=args.seeds,
-                               learned=not args.lqg_only)
+                               learned=not args.lqg_only,
+                               learned_backend="jax" if jax else "sb3",
+                               progress=not args.no_progress)
     for answer in report["answers"]:
         print("-", answer)
     print(f"\nLQG grid: {report['lqg_tasks']} tasks in {report['lqg_seconds']:.0f} s; learned "

@@ -118,26 +118,12 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
     the numpy plants agree given the same noise (the parity tests), so these returns differ
     from the SB3 backend's only by the controllers — the same episodes, not merely the same
     distribution."""
-    import jax
-    import numpy as np
-
     from fir_gym.training.vec_env import make_single_env
 
-    from .train import make_algorithm, make_env
+    from .policy import JaxPolicy
 
-    ts = result.train_state
-    if ts is None:
-        raise ValueError(f"{result.env_id} {result.kind}: the result has no train state (a "
-                         "run folder's policies are read by fir_gym.jax.train.load)")
     plant = dict(result.env_kwargs)
-    env_j, params = make_env(result.env_id, result.kind, plant, result.kind_kwargs)
-    algo = make_algorithm(env_j, params, result.recipe)
-
-    @jax.jit
-    def act(actor: Any, rms: Any, obs: Any) -> Any:
-        seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
-        return algo.actor.apply(actor, seen[None], method="mean_action")[0]
-
+    policies = [JaxPolicy(result, i) for i in range(len(result.seeds))]
     kind, options = result.kind, dict(result.kind_kwargs)
     env = (make_single_env(result.env_id, observation="true", **plant) if kind == "true"
            else make_single_env(result.env_id, **plant) if kind == "measurement"
@@ -148,16 +134,13 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
                                 **plant))
     out = []
     try:
-        for i in range(len(result.seeds)):
-            actor = jax.tree.map(lambda x, i=i: x[i], ts.actor_ts.params)
-            rms = jax.tree.map(lambda x, i=i: x[i], ts.obs_rms_state)
+        for policy in policies:
             returns = []
             for episode in range(episodes):
                 obs, _ = env.reset(seed=seed + episode)
                 total, done = 0.0, False
                 while not done:
-                    action = np.asarray(act(actor, rms, np.asarray(obs, dtype=np.float64)))
-                    obs, reward, terminated, truncated, _ = env.step(action.astype(np.float32))
+                    obs, reward, terminated, truncated, _ = env.step(policy.actions(obs))
                     total, done = total + float(reward), terminated or truncated
                 returns.append(total)
             out.append(returns)

@@ -131,8 +131,14 @@ def learned_tasks(plants: Sequence[str], conditions: Sequence[str], out: Path, *
 def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
                   plants: Sequence[str] | None = None,
                   conditions: Sequence[str] | None = None, seeds: int | None = None,
-                  learned: bool = True) -> dict[str, Any]:
-    """Run the grids and write ``OUT/results.json``, ``OUT/REPORT.md`` and the figures."""
+                  learned: bool = True, learned_backend: str = "sb3",
+                  progress: bool = True) -> dict[str, Any]:
+    """Run the grids and write ``OUT/results.json``, ``OUT/REPORT.md`` and the figures.
+    ``learned_backend="jax"`` trains the learned grid with :mod:`fir_gym.jax`
+    (:mod:`fir_gym.jax.robustness`: what it cannot train is left out and listed in the
+    report)."""
+    if learned_backend not in ("sb3", "jax"):
+        raise ValueError(f"learned_backend must be 'sb3' or 'jax'; got {learned_backend!r}")
     from fir_gym.code_version import code_version
     from fir_gym.scenarios.runner import SERIAL
 
@@ -151,10 +157,16 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     learned_results: list[dict[str, Any]] = []
     learned_seconds = 0.0
     reused = 0
+    learned_skipped: list[str] = []
     if learned:
         start = time.perf_counter()
         tasks = learned_tasks(chosen_plants, chosen_conditions, out, quick=quick, seeds=seeds)
-        learned_results = runner.map(run_task, tasks, desc="learned grid")
+        if learned_backend == "jax":
+            from fir_gym.jax.robustness import run_groups
+
+            learned_results, learned_skipped = run_groups(tasks, progress=progress)
+        else:
+            learned_results = runner.map(run_task, tasks, desc="learned grid")
         learned_seconds = time.perf_counter() - start
         reused = sum(bool(r.get("reused")) for r in learned_results)
     records = list(lqg_results) + [rec for r in learned_results for rec in r["records"]]
@@ -163,6 +175,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
         "quick": quick, "code_version": code_version(),
         "machine": {"cpu": cpu_model(), "cores": cores(), "python": platform.python_version(),
                     "backend": getattr(runner, "backend", "serial"),
+                    "learned_backend": learned_backend if learned else None,
                     "jobs": getattr(runner, "jobs", None), "load_start": load_start,
                     "load_end": load_average()},
         "lqg_seconds": lqg_seconds, "lqg_tasks": len(lqg_results),
@@ -175,6 +188,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
         "strength_meaning": {name: get_condition(name).strength_meaning
                              for name in chosen_conditions},
         "skipped": skipped(chosen_plants, chosen_conditions),
+        "learned_skipped": learned_skipped,
         "tables": tables}
     report["answers"] = answers(report, records)
     report["details"] = details(report, records)

@@ -94,26 +94,14 @@ def task_key(task: LearnedTask, config: Any) -> dict[str, Any]:
             "eval_seed": task.eval_seed, "gate": GATE}
 
 
-def run_learned_task(task: LearnedTask) -> dict[str, Any]:
-    """Train (or reuse), then evaluate under every setting (module docstring)."""
+def evaluate_controller(task: LearnedTask, config: Any, policy: Any
+                        ) -> tuple[list[dict[str, Any]], float]:
+    """The trained ``policy`` of ``task`` (its training configuration ``config``) played under
+    every setting, plain and — on an estimate — gated: the records and the seconds taken.
+    Both backends' controllers are evaluated here (:class:`SB3Policy`, and
+    :class:`fir_gym.jax.policy.JaxPolicy` in :mod:`fir_gym.jax.robustness`)."""
     import gymnasium as gym
 
-    from fir_gym.training.evaluation import load_controller
-    from fir_gym.training.run import train
-
-    config = training_config(task)
-    out = Path(task.run_dir)
-    cache = out / "robustness.json"
-    key = task_key(task, config)
-    if cache.is_file():
-        saved = json.loads(cache.read_text())
-        if saved.get("key") == key:
-            return {**saved, "reused": True}
-    start = time.perf_counter()
-    train(config, out, resume=True)
-    trained = time.perf_counter() - start
-    model, normaliser = load_controller(config, out, None)
-    policy = SB3Policy(model, normaliser)
     plan = plant_plan(task.env_id)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -139,8 +127,29 @@ def run_learned_task(task: LearnedTask) -> dict[str, Any]:
                          "strength": strength},
                 **episode_summary(episodes, n_x=len(plant.state_names),
                                   burst=burst[0][:2] if burst else None)})
-    result = {"key": key, "train_seconds": trained,
-              "eval_seconds": time.perf_counter() - start, "records": records}
+    return records, time.perf_counter() - start
+
+
+def run_learned_task(task: LearnedTask) -> dict[str, Any]:
+    """Train (or reuse), then evaluate under every setting (module docstring)."""
+    from fir_gym.training.evaluation import load_controller
+    from fir_gym.training.run import train
+
+    config = training_config(task)
+    out = Path(task.run_dir)
+    cache = out / "robustness.json"
+    key = task_key(task, config)
+    if cache.is_file():
+        saved = json.loads(cache.read_text())
+        if saved.get("key") == key:
+            return {**saved, "reused": True}
+    start = time.perf_counter()
+    train(config, out, resume=True)
+    trained = time.perf_counter() - start
+    model, normaliser = load_controller(config, out, None)
+    records, evaluated = evaluate_controller(task, config, SB3Policy(model, normaliser))
+    result = {"key": key, "train_seconds": trained, "eval_seconds": evaluated,
+              "records": records}
     out.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(result) + "\n")
     return result

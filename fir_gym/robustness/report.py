@@ -63,6 +63,13 @@ def markdown(report: dict[str, Any], figures: list[str] | None = None) -> str:
     if report.get("skipped"):
         lines += ["Left out of the LQG grid (the estimator refuses the setting): "
                   + "; ".join(report["skipped"]) + ".", ""]
+    if machine.get("learned_backend") == "jax":
+        lines += ["The learned grid was trained with the JAX backend (`--backend jax`: "
+                  "every seed of a plant, kind and regime in one compiled program) and "
+                  "evaluated in the numpy envs like the stable-baselines3 one.", ""]
+    if report.get("learned_skipped"):
+        lines += ["Left out of the learned grid: " + "; ".join(report["learned_skipped"])
+                  + ".", ""]
     lines += ["## Answers", ""] + [f"- {a}" for a in report.get("answers", [])] + [""]
     if report.get("details"):
         lines += ["FIR against Kalman, setting by setting (LQG on each family's best):", ""]

@@ -1,0 +1,98 @@
+"""``fir-gym benchmark-robustness --backend jax``: the learned grid trained by fir_gym.jax.
+
+Oracles: the single numpy env of ``fir-gym evaluate`` (:func:`fir_gym.jax.benchmark.
+play_in_numpy_env`, one env per episode, ``reset(seed=EVAL_SEED + i)``) replaying the saved
+run folder's policies, against the benchmark's records (a native vector env, sub-env ``i``
+on seed ``EVAL_SEED + i``) — two code paths that must give the same episodes; and the
+training configuration the records name, against what the run folder recorded.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+pytest.importorskip("gymnax")
+pytest.importorskip("rejax")
+
+from fir_gym.jax.robustness import (  # noqa: E402
+    group_folder,
+    groups,
+    refusal,
+    run_group,
+)
+from fir_gym.robustness.benchmark import learned_tasks, run_benchmark  # noqa: E402
+from fir_gym.robustness.learned_grid import LearnedTask  # noqa: E402
+from fir_gym.robustness.plan import EVAL_SEED, settings  # noqa: E402
+
+ORBIT = "fir_gym/Orbit-v0"
+
+
+def _task(tmp: Path, kind: str, regime: str, seed: int = 0, steps: int = 2048,
+          conditions: tuple[str, ...] = ("nominal",)) -> LearnedTask:
+    return LearnedTask(ORBIT, kind, regime, seed, steps, 3, EVAL_SEED,
+                       tuple(settings(list(conditions), quick=True)),
+                       str(tmp / "runs" / "Orbit-v0" / f"{regime}-{kind}-seed{seed}"))
+
+
+def test_what_the_backend_leaves_out_is_named(tmp_path: Path) -> None:
+    assert refusal(_task(tmp_path, "ekf", "nominal")) is None
+    assert refusal(_task(tmp_path, "measurement-stack", "dr-mismatch")) is None
+    assert "no recurrent kind" in str(refusal(_task(tmp_path, "recurrent", "nominal")))
+    assert "no sensor faults" in str(refusal(_task(tmp_path, "ekf", "dr-dropout")))
+    tasks = [_task(tmp_path, k, r, s) for k in ("true", "ekf") for r in ("nominal",)
+             for s in (1, 0, 2)]
+    grouped = groups(tasks)
+    assert [[t.seed for t in g] for g in grouped] == [[0, 1, 2], [0, 1, 2]]
+    assert group_folder(grouped[1]).name == "nominal-ekf-jax"
+
+
+def test_the_records_are_the_saved_policies_played_in_the_numpy_env(tmp_path: Path) -> None:
+    """A two-seed group: the benchmark's nominal records equal the run folder's policies
+    replayed one episode at a time (``play_in_numpy_env``) — right seed, right policy,
+    right normalisation; a second call reuses every record."""
+    from fir_gym.jax.benchmark import play_in_numpy_env
+    from fir_gym.jax.train import load
+
+    group = [_task(tmp_path, "ekf", "nominal", seed) for seed in (0, 1)]
+    results = run_group(group)
+    assert [r["backend"] for r in results] == ["jax", "jax"]
+    run = load(group_folder(group))
+    assert run.seeds == [0, 1]
+    replayed = play_in_numpy_env(run, 3, seed=EVAL_SEED)
+    for i, result in enumerate(results):
+        (nominal,) = [r for r in result["records"]
+                      if r["task"]["condition"] == "nominal" and r["task"]["kind"] == "ekf"]
+        assert nominal["task"]["seed"] == i
+        np.testing.assert_allclose(nominal["returns"], replayed[i], rtol=1e-9)
+        assert {r["task"]["kind"] for r in result["records"]} == {"ekf", "ekf+gate"}
+    again = run_group(group)
+    assert all(r["reused"] for r in again)
+    assert [r["records"] for r in again] == [r["records"] for r in results]
+
+
+def test_dr_mismatch_trains_on_the_randomized_plant(tmp_path: Path) -> None:
+    """The dr-mismatch regime trains on every randomizable parameter drawn with the
+    condition's middle spread (what the SB3 backend trains on), recorded in the run."""
+    (group,) = groups([_task(tmp_path, "true", "dr-mismatch")])
+    run_group(group)
+    recorded = json.loads((group_folder(group) / "results.json").read_text())
+    assert recorded["env_kwargs"]["randomize"] == {"mu": 0.1, "thrust_max": 0.1}
+
+
+def test_the_quick_benchmark_runs_and_says_what_it_left_out(tmp_path: Path) -> None:
+    report = run_benchmark(tmp_path, quick=True, plants=[ORBIT], conditions=["dropout"],
+                           learned_backend="jax", progress=False)
+    tasks = learned_tasks([ORBIT], ["dropout"], tmp_path, quick=True)
+    trained = [t for t in tasks if refusal(t) is None]
+    assert report["learned_tasks"] == len(trained) > 0
+    assert report["machine"]["learned_backend"] == "jax"
+    assert any("dr-dropout" in s for s in report["learned_skipped"])
+    text = (tmp_path / "REPORT.md").read_text()
+    assert "trained with the JAX backend" in text and "Left out of the learned grid" in text
+    with pytest.raises(ValueError, match="learned_backend must be"):
+        run_benchmark(tmp_path, quick=True, plants=[ORBIT], learned_backend="torch")
