@@ -86,10 +86,11 @@ def watch_limits_of(params: Any) -> WatchLimits:
 
 
 def watch_state(state: Any, x: jax.Array, P: jax.Array, nis: jax.Array,
-                limits: WatchLimits) -> Any:
+                limits: WatchLimits, usable: jax.Array | bool = True) -> Any:
     """:meth:`fir_gym.estimators.base.Estimator._accept` (:func:`fir_gym.jax.kalman.watch`)
-    on the filter record of an env state: the state afterwards."""
-    return with_belief(state, watch(belief_of(state), x, P, nis, limits))
+    on the filter record of an env state: the state afterwards (``usable``: whether the step
+    had a measurement)."""
+    return with_belief(state, watch(belief_of(state), x, P, nis, limits, usable))
 
 
 class FilteredPlant(gymnax_env.Environment[Any, Any]):
@@ -102,6 +103,13 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     ``observation`` (:data:`OBSERVATIONS`), the views of the state (:meth:`get_obs`:
     ``estimate+covariance`` gives the upper triangle of ``P`` row by row) and the spaces;
     one action in ``[-1, 1]``.
+
+    ``dropout`` (static, a probability; 0 by default) is the sensor's: each reading —
+    the reset's too — is lost with that probability, as under
+    :class:`~fir_gym.wrappers.SensorFaults` ``(dropout=p)`` (:meth:`reading_missing`). A lost
+    reading is *missing*: what is observed holds the last delivered one (before the first,
+    ``H`` times the plant's initial-state mean, the numpy sensor's ``h(initial_state)``), the
+    filters predict only, and ``info["measurement_missing"]`` says so.
 
     ``options`` are the kind's (static): ``horizon``, the window of ``"measurement-stack"``
     and of the windowed filters (it sizes the state; :attr:`default_horizon`, the numpy
@@ -122,9 +130,13 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     #: plant's ``randomizable``, same names; :class:`fir_gym.jax.randomized.Randomized`)
     randomizable: ClassVar[tuple[str, ...]] = ()
 
-    def __init__(self, kind: str | None = None, observation: str = "estimate",
-                 **options: Any) -> None:
+    def __init__(self, kind: str | None = None, observation: str = "estimate", *,
+                 dropout: float = 0.0, **options: Any) -> None:
         super().__init__()
+        ok = not isinstance(dropout, bool) and isinstance(dropout, (int, float, np.floating))
+        if not ok or not 0.0 <= float(dropout) <= 1.0:
+            raise ValueError(f"dropout must be a probability in [0, 1]; got {dropout!r}")
+        self.dropout = float(dropout)
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
             raise ValueError(f"kind must be one of {self.kinds}; got {kind!r}")
@@ -184,6 +196,43 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     def num_actions(self) -> int:
         return 1
 
+    # ------------------------------------------------------------- the sensor's dropout
+    def reading_missing(self, key: jax.Array) -> jax.Array:
+        """Whether the reading of the reset or step keyed ``key`` is lost: one uniform of the
+        key's fault stream (``fold_in(key, FAULT_STREAM)``, the numpy sensor's tag, so the
+        plant's own noise from ``key`` is unchanged) below :attr:`dropout`; always False
+        without dropout (no draw)."""
+        from fir_gym.wrappers.faulty_sensor import FAULT_STREAM
+
+        if not self.dropout:
+            return jnp.asarray(False)
+        u = jax.random.uniform(jax.random.fold_in(key, FAULT_STREAM), dtype=jnp.float64)
+        return u < self.dropout
+
+    def deliver(self, missing: jax.Array, y: jax.Array, held: jax.Array) -> jax.Array:
+        """The reading delivered: ``y``, or ``held`` (the last delivered, or at a reset
+        :meth:`first_hold`) where it is missing."""
+        return y if not self.dropout else jnp.where(missing, held, y)
+
+    def first_hold(self, params: Any) -> jax.Array:
+        """What is held before the first reading arrives: ``H`` times the plant's
+        initial-state mean (:func:`fir_gym.wrappers.sensor_faults._sensor_setup`)."""
+        return self.filter_model(params).H @ jnp.asarray(params.initial_state,
+                                                          dtype=jnp.float64)
+
+    def own_update(self, missing: jax.Array, before: Any, updated: Any, x_pred: jax.Array,
+                   P_pred: jax.Array, params: Any) -> Any:
+        """The plant's own filter after a step: ``updated`` (the state after the update with
+        the delivered reading and its watch), or where the reading is missing the
+        prediction ``(x_pred, P_pred)`` alone, watched with no measurement (NaN NIS, the run
+        of high NIS ended) — :meth:`fir_gym.estimators.base.Estimator.step` with ``None``.
+        ``before``: the state before the update (its filter fields the previous step's)."""
+        if not self.dropout:
+            return updated
+        predicted = watch_state(before, x_pred, P_pred, jnp.asarray(jnp.nan),
+                                watch_limits_of(params), usable=False)
+        return jax.tree.map(lambda a, b: jnp.where(missing, a, b), predicted, updated)
+
     def get_obs(self, state: Any, params: Any = None, key: jax.Array | None = None) -> Any:
         if self.kind == "true":
             return state.x
@@ -220,36 +269,45 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
 
     # ------------------------------------------------------------- the kinds' shared steps
-    def finish_reset(self, state: Any, params: Any) -> Any:
+    def finish_reset(self, state: Any, params: Any, missing: jax.Array | bool = False) -> Any:
         """A reset's state after the plant's own part: the stack's windows started, or a
         generic filter's first update with ``y[0]`` from its prior (the state's filter
-        fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`)."""
+        fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`) — none where the reading
+        is ``missing``."""
         if self.kind == "measurement-stack":
             return state.replace(memory=stack_start(state.y, self.options["horizon"]))
         if self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
             memory = kind.start(state.filter_x, state.filter_P, self.options)
+            extra = {"missing": missing} if self.dropout else {}
             memory, x, P, nis = kind.update(memory, state.filter_x, state.filter_P, state.y,
-                                            self.filter_model(params), self.options)
+                                            self.filter_model(params), self.options, **extra)
             state = watch_state(state.replace(memory=memory), x, P, nis,
-                                watch_limits_of(params))
+                                watch_limits_of(params), ~jnp.asarray(missing))
         return state
 
     def finish_step(self, old: Any, new: Any, u: jax.Array, params: Any,
-                    info: dict[str, Any]) -> tuple[Any, Any, dict[str, Any]]:
+                    info: dict[str, Any], missing: jax.Array | bool = False
+                    ) -> tuple[Any, Any, dict[str, Any]]:
         """A step's observation, state and ``info`` after the plant's own part (``new``: the
-        plant moved, its measurement ``new.y``; the plant's own filter, if that is the kind,
-        already updated): the stack pushed, or a generic filter's step with the applied
-        action ``u`` — and for every filter kind the ``info`` keys ``estimate``,
-        ``estimation_error``, ``estimator_diverged`` and ``nis``."""
+        plant moved, the reading delivered ``new.y``; the plant's own filter, if that is the
+        kind, already updated): the stack pushed (a missing reading pushes the held one, as
+        the numpy stack reads what the sensor delivers), or a generic filter's step with the
+        applied action ``u`` (a prediction only where the reading is ``missing``) — and for
+        every filter kind the ``info`` keys ``estimate``, ``estimation_error``,
+        ``estimator_diverged`` and ``nis``; with dropout, ``measurement_missing``."""
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
         elif self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
+            extra = {"missing": missing} if self.dropout else {}
             memory, x, P, nis = kind.predict_update(old.memory, old.filter_x, old.filter_P,
                                                     new.y, u, self.filter_model(params),
-                                                    self.options)
-            new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params))
+                                                    self.options, **extra)
+            new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params),
+                              ~jnp.asarray(missing))
+        if self.dropout:
+            info["measurement_missing"] = jnp.asarray(missing)
         if self.kind in self.filter_kinds:
             info.update(estimate=new.filter_x, estimation_error=new.x - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)

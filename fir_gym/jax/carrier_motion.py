@@ -394,22 +394,26 @@ class CarrierMotion(FilteredPlant):
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams
                   ) -> tuple[Any, CarrierMotionState]:
-        return self.reset_with_noise(carrier_motion_reset_noise(key, params), params)
+        return self.reset_with_noise(carrier_motion_reset_noise(key, params), params,
+                                     self.reading_missing(key))
 
-    def reset_with_noise(self, noise: CarrierMotionResetNoise, params: CarrierMotionParams
-                         ) -> tuple[Any, CarrierMotionState]:
+    def reset_with_noise(self, noise: CarrierMotionResetNoise, params: CarrierMotionParams,
+                         missing: jax.Array | bool = False) -> tuple[Any, CarrierMotionState]:
         """The reset with the given noise (:meth:`fir_gym.envs._base.PlantEnv.reset`): ``x =
-        initial_state + noise.initial``, ``y = C x + noise.measurement``; the KF (for
-        ``"kf"``) consumes ``y`` from its prior (an update only)."""
+        initial_state + noise.initial``, ``y = C x + noise.measurement`` (held where
+        ``missing``, with dropout); the KF (for ``"kf"``) consumes ``y`` from its prior (an
+        update only)."""
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
-        y = jnp.asarray(params.C) @ x + noise.measurement
+        y = self.deliver(missing, jnp.asarray(params.C) @ x + noise.measurement,
+                         self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = CarrierMotionState.start(x, y, x0, P0)
         if self.kind == "kf":
-            state = watch_state(state, *kf_update(x0, P0, y, params.nominal_C, params.nominal_R),
-                                params.watch)
-        state = self.finish_reset(state, params)
+            updated = watch_state(state, *kf_update(x0, P0, y, params.nominal_C,
+                                                    params.nominal_R), params.watch)
+            state = self.own_update(missing, state, updated, x0, P0, params)
+        state = self.finish_reset(state, params, missing)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -417,15 +421,16 @@ class CarrierMotion(FilteredPlant):
                  params: CarrierMotionParams
                  ) -> tuple[Any, CarrierMotionState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, carrier_motion_noise(key, params), params)
+            state, action, carrier_motion_noise(key, params), params, self.reading_missing(key))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: CarrierMotionState, action: Any, noise: CarrierMotionNoise,
-                        params: CarrierMotionParams
+                        params: CarrierMotionParams, missing: jax.Array | bool = False
                         ) -> tuple[Any, CarrierMotionState, jax.Array, jax.Array, dict[str, Any]]:
-        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
+        with dropout, a ``missing`` reading holds the last delivered one.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of
         :class:`~fir_gym.envs.carrier_motion.CarrierMotionEnv` (``x[k+1] = A_d x[k] + w_d``,
@@ -456,7 +461,7 @@ class CarrierMotion(FilteredPlant):
         # every finite state is in the domain: only a failed step terminates
         terminated = failure > 0
         x_kept = jnp.where(terminated, x, x_next)
-        y = jnp.where(terminated, state.y, y_next)
+        y = self.deliver(missing, jnp.where(terminated, state.y, y_next), state.y)
         reward = jnp.where(terminated, penalty, reward)
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
@@ -464,7 +469,8 @@ class CarrierMotion(FilteredPlant):
         if self.kind == "kf":
             xp, Pp = kf_predict(state.filter_x, state.filter_P, params.nominal_A_d,
                                 params.nominal_Q_d)
-            new = watch_state(new, *kf_update(xp, Pp, y, params.nominal_C, params.nominal_R),
-                              params.watch)
-        obs, new, info = self.finish_step(state, new, u, params, info)
+            updated = watch_state(new, *kf_update(xp, Pp, y, params.nominal_C,
+                                                  params.nominal_R), params.watch)
+            new = self.own_update(missing, new, updated, xp, Pp, params)
+        obs, new, info = self.finish_step(state, new, u, params, info, missing)
         return obs, new, reward, terminated, info

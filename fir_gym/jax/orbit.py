@@ -358,36 +358,40 @@ class Orbit(FilteredPlant):
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[Any, OrbitState]:
-        return self.reset_with_noise(orbit_reset_noise(key, params), params)
+        return self.reset_with_noise(orbit_reset_noise(key, params), params,
+                                     self.reading_missing(key))
 
-    def reset_with_noise(self, noise: OrbitResetNoise, params: OrbitParams
-                         ) -> tuple[Any, OrbitState]:
+    def reset_with_noise(self, noise: OrbitResetNoise, params: OrbitParams,
+                         missing: jax.Array | bool = False) -> tuple[Any, OrbitState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``,
-        ``y = r + noise.measurement``; the EKF (for ``"ekf"``) consumes ``y`` from its prior."""
+        ``y = r + noise.measurement`` (held where ``missing``, with dropout); the EKF (for
+        ``"ekf"``) consumes ``y`` from its prior."""
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
-        y = x[:1] + noise.measurement
+        y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = OrbitState.start(x, y, x0, P0)
         if self.kind == "ekf":
-            state = watch_state(state, *ekf_update(x0, P0, y, params.nominal_R),
-                                watch_limits_of(params))
-        state = self.finish_reset(state, params)
+            updated = watch_state(state, *ekf_update(x0, P0, y, params.nominal_R),
+                                  watch_limits_of(params))
+            state = self.own_update(missing, state, updated, x0, P0, params)
+        state = self.finish_reset(state, params, missing)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
     def step_env(self, key: jax.Array, state: OrbitState, action: Any, params: OrbitParams
                  ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, orbit_noise(key, params), params)
+            state, action, orbit_noise(key, params), params, self.reading_missing(key))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: OrbitState, action: Any, noise: OrbitNoise,
-                        params: OrbitParams
+                        params: OrbitParams, missing: jax.Array | bool = False
                         ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
-        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
+        with dropout, a ``missing`` reading holds the last delivered one.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of :class:`~fir_gym.envs.orbit.OrbitEnv`
         (and, for ``"ekf"``, the EKF step of
@@ -425,7 +429,7 @@ class Orbit(FilteredPlant):
             [1, 2, 4, 3], 0)
         failed = failure > 0
         x_kept = jnp.where(failed, x, x_next)
-        y = jnp.where(failed, state.y, y_next)
+        y = self.deliver(missing, jnp.where(failed, state.y, y_next), state.y)
         reward = jnp.where(failed, penalty, reward)
         terminated = failed | ~in_domain
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
@@ -436,7 +440,8 @@ class Orbit(FilteredPlant):
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,
                                        params.nominal_euler_dt, params.nominal_substeps)
             Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
-            new = watch_state(new, *ekf_update(xp, Pp, y, params.nominal_R),
-                              watch_limits_of(params))
-        obs, new, info = self.finish_step(state, new, u, params, info)
+            updated = watch_state(new, *ekf_update(xp, Pp, y, params.nominal_R),
+                                  watch_limits_of(params))
+            new = self.own_update(missing, new, updated, xp, Pp, params)
+        obs, new, info = self.finish_step(state, new, u, params, info, missing)
         return obs, new, reward, terminated, info

@@ -591,13 +591,6 @@ def ekf_model(params: PendulumSliderParams
     return f_and_F
 
 
-def ekf_step(b: Belief, y: jax.Array, u: jax.Array, params: PendulumSliderParams) -> Belief:
-    """One EKF step with the measurement ``y`` and the applied action ``u`` (1,): predict
-    with the model (:func:`fir_gym.jax.kalman.ekf_predict`), then :func:`ekf_correct`."""
-    xp, Pp = ekf_predict(b.x, b.P, u, params.nominal_Q, ekf_model(params))
-    return ekf_correct(b, xp, Pp, y, params)
-
-
 # ---------------------------------------------------------------------------- the environment
 class PendulumSlider(FilteredPlant):
     """``fir_gym/PendulumSlider-v0`` as a gymnax environment observing ``kind`` (see the
@@ -642,21 +635,23 @@ class PendulumSlider(FilteredPlant):
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: PendulumSliderParams
                   ) -> tuple[Any, PendulumSliderState]:
-        return self.reset_with_noise(pendulum_slider_reset_noise(key, params), params)
+        return self.reset_with_noise(pendulum_slider_reset_noise(key, params), params,
+                                     self.reading_missing(key))
 
-    def reset_with_noise(self, noise: PendulumSliderResetNoise, params: PendulumSliderParams
-                         ) -> tuple[Any, PendulumSliderState]:
+    def reset_with_noise(self, noise: PendulumSliderResetNoise, params: PendulumSliderParams,
+                         missing: jax.Array | bool = False) -> tuple[Any, PendulumSliderState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``,
-        ``y = x + noise.measurement``; the EKF (for ``"ekf"``) consumes ``y`` from its
-        prior."""
+        ``y = x + noise.measurement`` (held where ``missing``, with dropout); the EKF (for
+        ``"ekf"``) consumes ``y`` from its prior."""
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
-        y = x + noise.measurement
+        y = self.deliver(missing, x + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = PendulumSliderState.start(x, y, x0, P0)
         if self.kind == "ekf":
-            state = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
-        state = self.finish_reset(state, params)
+            updated = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
+            state = self.own_update(missing, state, updated, x0, P0, params)
+        state = self.finish_reset(state, params, missing)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -664,16 +659,19 @@ class PendulumSlider(FilteredPlant):
                  params: PendulumSliderParams
                  ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, pendulum_slider_noise(key, params), params)
+            state, action, pendulum_slider_noise(key, params), params,
+            self.reading_missing(key))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: PendulumSliderState, action: Any,
-                        noise: PendulumSliderNoise, params: PendulumSliderParams
+                        noise: PendulumSliderNoise, params: PendulumSliderParams,
+                        missing: jax.Array | bool = False
                         ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array,
                                    dict[str, Any]]:
-        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
+        with dropout, a ``missing`` reading holds the last delivered one.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of :class:`PendulumSliderEnv` with the
         analytic plant (and, for ``"ekf"``, the EKF step of
@@ -694,7 +692,7 @@ class PendulumSlider(FilteredPlant):
         else:
             x_det = slider_interval(state.x, U, p, params.friction, params.frame_skip)
         return self._finish_step(state, u_in, u, x_det + noise.process, noise.measurement,
-                                 prediction, params)
+                                 prediction, params, missing)
 
     def step_with_transition(self, state: PendulumSliderState, action: Any, x_next: Any,
                              measurement_noise: Any, params: PendulumSliderParams
@@ -712,7 +710,7 @@ class PendulumSlider(FilteredPlant):
 
     def _finish_step(self, state: PendulumSliderState, u_in: jax.Array, u: jax.Array,
                      x_next: jax.Array, v: jax.Array, prediction: Any,
-                     params: PendulumSliderParams
+                     params: PendulumSliderParams, missing: jax.Array | bool = False
                      ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array, dict[str, Any]]:
         x = state.x
         time = state.time + 1
@@ -729,7 +727,7 @@ class PendulumSlider(FilteredPlant):
             [1, 2, 4, 3], 0)
         failed = failure > 0
         x_kept = jnp.where(failed, x, x_next)
-        y = jnp.where(failed, state.y, y_next)
+        y = self.deliver(missing, jnp.where(failed, state.y, y_next), state.y)
         reward = jnp.where(failed, penalty, reward)
         terminated = failed | ~in_domain
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
@@ -737,13 +735,14 @@ class PendulumSlider(FilteredPlant):
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
         if self.kind == "ekf":
             if prediction is None:
-                belief = ekf_step(belief_of(state), y, u, params)
+                xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, params.nominal_Q,
+                                     ekf_model(params))
             else:                 # the model's interval came from the fused loop
                 xp, F = prediction
                 Pp = symmetrize(F @ state.filter_P @ F.T + params.nominal_Q)
-                belief = ekf_correct(belief_of(state), xp, Pp, y, params)
-            new = with_belief(new, belief)
-        obs, new, info = self.finish_step(state, new, u, params, info)
+            updated = with_belief(new, ekf_correct(belief_of(state), xp, Pp, y, params))
+            new = self.own_update(missing, new, updated, xp, Pp, params)
+        obs, new, info = self.finish_step(state, new, u, params, info, missing)
         return obs, new, reward, terminated, info
 
 

@@ -58,7 +58,9 @@ def make(env_id: str, kind: str | None = None, *,
     env's keywords ``env_kwargs``. Of the numpy plants' condition keywords, ``randomize``
     (the ``mismatch`` condition: the truth's parameters drawn at every reset) wraps the env
     in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` is not supported (the params
-    builder refuses it).
+    builder refuses it). Of ``sensor_faults`` (``gym.make``'s, the arguments of
+    :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor has ``dropout``
+    (:class:`fir_gym.jax._plant.FilteredPlant`'s ``dropout``); any other fault is refused.
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
@@ -71,12 +73,13 @@ def make(env_id: str, kind: str | None = None, *,
     if kind not in plant.kinds:
         raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
     randomize = env_kwargs.pop("randomize", None)
+    dropout = _dropout(env_id, env_kwargs.pop("sensor_faults", None))
     try:
         params = plant.params(**env_kwargs)
     except TypeError as error:                       # an unknown keyword
         raise ValueError(f"{env_id}: {error}") from None
     try:
-        env = plant.env_class(kind, **(kind_kwargs or {}))
+        env = plant.env_class(kind, dropout=dropout, **(kind_kwargs or {}))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{env_id} kind {kind}: kind_kwargs: {error}") from None
     if randomize:
@@ -84,3 +87,21 @@ def make(env_id: str, kind: str | None = None, *,
 
         env = Randomized(env, randomize)
     return env, params
+
+
+def _dropout(env_id: str, sensor_faults: Any) -> float:
+    """The dropout probability of ``sensor_faults`` (0 for none); ValueError naming a fault
+    the JAX sensor does not have or a bad value."""
+    if not sensor_faults:
+        return 0.0
+    if not isinstance(sensor_faults, dict):
+        raise ValueError(f"sensor_faults must be a dict of SensorFaults keywords; got "
+                         f"{type(sensor_faults).__name__}")
+    other = sorted(set(sensor_faults) - {"dropout"})
+    if other:
+        raise ValueError(f"{env_id}: the JAX sensor has dropout only; sensor_faults names "
+                         f"{other} (the numpy envs have every fault: gym.make(..., "
+                         "sensor_faults=...))")
+    from fir_gym.wrappers.faulty_sensor import check_faults
+
+    return float(check_faults(n_y=1, episode_steps=None, **sensor_faults).dropout)

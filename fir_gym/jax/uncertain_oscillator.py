@@ -418,23 +418,26 @@ class UncertainOscillator(FilteredPlant):
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: UncertainOscillatorParams
                   ) -> tuple[Any, UncertainOscillatorState]:
-        return self.reset_with_noise(uncertain_oscillator_reset_noise(key, params), params)
+        return self.reset_with_noise(uncertain_oscillator_reset_noise(key, params), params,
+                                     self.reading_missing(key))
 
     def reset_with_noise(self, noise: UncertainOscillatorResetNoise,
-                         params: UncertainOscillatorParams
+                         params: UncertainOscillatorParams, missing: jax.Array | bool = False
                          ) -> tuple[Any, UncertainOscillatorState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``, ``y = x1 +
-        noise.measurement``; the EKF (for ``"ekf"``) consumes ``y`` from its prior
+        noise.measurement`` (held where ``missing``, with dropout); the EKF (for ``"ekf"``)
+        consumes ``y`` from its prior
         (:meth:`fir_gym.envs._base.PlantEnv.reset`, then
         :meth:`fir_gym.wrappers.EstimatorObservation.reset`)."""
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
-        y = x[:1] + noise.measurement
+        y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = UncertainOscillatorState.start(x, y, x0, P0)
         if self.kind == "ekf":
-            state = ekf_update(state, x0, P0, y, params)
-        state = self.finish_reset(state, params)
+            state = self.own_update(missing, state, ekf_update(state, x0, P0, y, params), x0,
+                                    P0, params)
+        state = self.finish_reset(state, params, missing)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -442,16 +445,19 @@ class UncertainOscillator(FilteredPlant):
                  params: UncertainOscillatorParams
                  ) -> tuple[Any, UncertainOscillatorState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, uncertain_oscillator_noise(key, params), params)
+            state, action, uncertain_oscillator_noise(key, params), params,
+            self.reading_missing(key))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: UncertainOscillatorState, action: Any,
-                        noise: UncertainOscillatorNoise, params: UncertainOscillatorParams
+                        noise: UncertainOscillatorNoise, params: UncertainOscillatorParams,
+                        missing: jax.Array | bool = False
                         ) -> tuple[Any, UncertainOscillatorState, jax.Array, jax.Array,
                                    dict[str, Any]]:
-        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
+        with dropout, a ``missing`` reading holds the last delivered one.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of :class:`~fir_gym.envs.
         uncertain_oscillator.UncertainOscillatorEnv` (its ``_transition`` with δ_k of
@@ -483,7 +489,7 @@ class UncertainOscillator(FilteredPlant):
             [1, 2, 4, 3], 0)
         failed = failure > 0
         x_kept = jnp.where(failed, x, x_next)
-        y = jnp.where(failed, state.y, y_next)
+        y = self.deliver(missing, jnp.where(failed, state.y, y_next), state.y)
         reward = jnp.where(failed, penalty, reward)
         terminated = failed | ~in_domain
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
@@ -492,6 +498,7 @@ class UncertainOscillator(FilteredPlant):
         if self.kind == "ekf":
             model = self.filter_model(params)
             xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model.Q, model.f_and_F)
-            new = ekf_update(new, xp, Pp, y, params)
-        obs, new, info = self.finish_step(state, new, u, params, info)
+            new = self.own_update(missing, new, ekf_update(new, xp, Pp, y, params), xp, Pp,
+                                  params)
+        obs, new, info = self.finish_step(state, new, u, params, info, missing)
         return obs, new, reward, terminated, info

@@ -491,23 +491,26 @@ class VanDerPol(FilteredPlant):
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: VanDerPolParams
                   ) -> tuple[Any, VanDerPolState]:
-        return self.reset_with_noise(van_der_pol_reset_noise(key, params), params)
+        return self.reset_with_noise(van_der_pol_reset_noise(key, params), params,
+                                     self.reading_missing(key))
 
-    def reset_with_noise(self, noise: VanDerPolResetNoise, params: VanDerPolParams
-                         ) -> tuple[Any, VanDerPolState]:
+    def reset_with_noise(self, noise: VanDerPolResetNoise, params: VanDerPolParams,
+                         missing: jax.Array | bool = False) -> tuple[Any, VanDerPolState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``, ``y = x1 +
-        noise.measurement`` (the degenerate interval); the EKF (for ``"ekf"``) consumes ``y``
+        noise.measurement`` (the degenerate interval; held where ``missing``, with
+        dropout); the EKF (for ``"ekf"``) consumes ``y``
         from its prior (:meth:`fir_gym.envs._base.PlantEnv.reset`,
         :meth:`fir_gym.wrappers.EstimatorObservation.reset`)."""
         require_x64()
         x = jnp.asarray(params.initial_state, dtype=jnp.float64) + noise.initial
-        y = x[:1] + noise.measurement
+        y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = VanDerPolState.start(x, y, x0, P0)
         if self.kind == "ekf":
-            state = watch_state(state, *ekf_correct(x0, P0, y, params),
-                                watch_limits_of(params))
-        state = self.finish_reset(state, params)
+            updated = watch_state(state, *ekf_correct(x0, P0, y, params),
+                                  watch_limits_of(params))
+            state = self.own_update(missing, state, updated, x0, P0, params)
+        state = self.finish_reset(state, params, missing)
         return self.get_obs(state, params), state
 
     # ------------------------------------------------------------------ step
@@ -515,15 +518,16 @@ class VanDerPol(FilteredPlant):
                  params: VanDerPolParams
                  ) -> tuple[Any, VanDerPolState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, van_der_pol_noise(key, params), params)
+            state, action, van_der_pol_noise(key, params), params, self.reading_missing(key))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: VanDerPolState, action: Any, noise: VanDerPolNoise,
-                        params: VanDerPolParams
+                        params: VanDerPolParams, missing: jax.Array | bool = False
                         ) -> tuple[Any, VanDerPolState, jax.Array, jax.Array, dict[str, Any]]:
-        """One env step with the given noise: ``(obs, state, reward, terminated, info)``.
+        """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
+        with dropout, a ``missing`` reading holds the last delivered one.
 
         :meth:`fir_gym.envs._base.PlantEnv.step` of
         :class:`~fir_gym.envs.van_der_pol.VanDerPolEnv` (and, for ``"ekf"``, the EKF step of
@@ -561,7 +565,7 @@ class VanDerPol(FilteredPlant):
             [1, 2, 4, 3], 0)
         failed = failure > 0
         x_kept = jnp.where(failed, x, x_next)
-        y = jnp.where(failed, state.y, y_next)
+        y = self.deliver(missing, jnp.where(failed, state.y, y_next), state.y)
         reward = jnp.where(failed, penalty, reward)
         terminated = failed | ~in_domain
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
@@ -577,7 +581,8 @@ class VanDerPol(FilteredPlant):
                     lambda xf, uf: heun_model_interval(xf, uf[0] * params.nominal_u_max,
                                                        params.nominal_epsilon, tau_model,
                                                        params.nominal_substeps))
-            new = watch_state(new, *ekf_correct(xp, Pp, y, params),
-                              watch_limits_of(params))
-        obs, new, info = self.finish_step(state, new, u, params, info)
+            updated = watch_state(new, *ekf_correct(xp, Pp, y, params),
+                                  watch_limits_of(params))
+            new = self.own_update(missing, new, updated, xp, Pp, params)
+        obs, new, info = self.finish_step(state, new, u, params, info, missing)
         return obs, new, reward, terminated, info
