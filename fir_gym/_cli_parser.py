@@ -274,8 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_runner_options(p, "tasks",
                         jax="; jax: the learned grid trained with fir_gym.jax (its kinds, "
-                            "regimes nominal and dr-mismatch; every seed of a plant, kind and "
-                            "regime in one compiled program; the jax extra: pip install "
+                            "every regime; every seed of a plant, kind and regime in one "
+                            "compiled program; the jax extra: pip install "
                             '".[jax]"), evaluated in the numpy envs; the LQG grid serial')
 
     p = command("watch", "record one episode as a GIF or MP4, the estimate drawn over the plant",

@@ -10,11 +10,12 @@ numpy envs, every condition and strength, plain and gated, the shared episodes),
 controllers, and the report is built from them the same way.
 
 **What the JAX backend trains** (:func:`refusal`): the kinds :data:`fir_gym.jax.train.
-SUPPORTED` lists (not ``recurrent``, not ``ufir``), on the nominal plant and under
-``dr-mismatch`` (the truth's parameters drawn at every reset:
-:class:`fir_gym.jax.randomized.Randomized`). ``dr-dropout`` needs the sensor faults and the
-filters' missing-reading steps in JAX, which the backend does not have yet: those tasks are
-left out, and the report says so (``learned_skipped``).
+SUPPORTED` lists (not ``recurrent``, not ``ufir``: those tasks are left out, and the report
+says so, ``learned_skipped``), in every regime: on the nominal plant, under ``dr-mismatch``
+(the truth's parameters drawn at every reset: :class:`fir_gym.jax.randomized.Randomized`)
+and under ``dr-dropout`` (the sensor's dropout:
+:meth:`fir_gym.jax._plant.FilteredPlant.reading_missing`, the filters predicting through a
+lost reading).
 
 Each task's records are cached in its own folder (``robustness.json``) under
 :func:`fir_gym.robustness.learned_grid.task_key` plus the backend: a rerun with the same key
@@ -36,9 +37,8 @@ from fir_gym.robustness.learned_grid import (
     training_config,
 )
 
-#: the training regimes the JAX backend has (:data:`fir_gym.robustness.plan.REGIMES`'s
-#: others are left out)
-JAX_REGIMES = ("nominal", "dr-mismatch")
+#: the training regimes the JAX backend has: all of :data:`fir_gym.robustness.plan.REGIMES`
+JAX_REGIMES = ("nominal", "dr-mismatch", "dr-dropout")
 
 
 def refusal(task: LearnedTask) -> str | None:
@@ -48,8 +48,8 @@ def refusal(task: LearnedTask) -> str | None:
     if task.kind not in SUPPORTED.get(task.env_id, ()):
         return f"the JAX backend has no {task.kind} kind on {task.env_id}"
     if task.regime not in JAX_REGIMES:
-        return (f"the JAX backend has no sensor faults, so no {task.regime} training (its "
-                f"regimes: {', '.join(JAX_REGIMES)})")
+        return (f"the JAX backend has no {task.regime} training (its regimes: "
+                f"{', '.join(JAX_REGIMES)})")
     return None
 
 

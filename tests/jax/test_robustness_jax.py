@@ -42,8 +42,10 @@ def _task(tmp: Path, kind: str, regime: str, seed: int = 0, steps: int = 2048,
 def test_what_the_backend_leaves_out_is_named(tmp_path: Path) -> None:
     assert refusal(_task(tmp_path, "ekf", "nominal")) is None
     assert refusal(_task(tmp_path, "measurement-stack", "dr-mismatch")) is None
+    assert refusal(_task(tmp_path, "efir", "dr-dropout")) is None
     assert "no recurrent kind" in str(refusal(_task(tmp_path, "recurrent", "nominal")))
-    assert "no sensor faults" in str(refusal(_task(tmp_path, "ekf", "dr-dropout")))
+    assert "no ufir kind" in str(refusal(LearnedTask(
+        "fir_gym/CarrierMotion-v0", "ufir", "nominal", 0, 2048, 3, EVAL_SEED, (), "x")))
     tasks = [_task(tmp_path, k, r, s) for k in ("true", "ekf") for r in ("nominal",)
              for s in (1, 0, 2)]
     grouped = groups(tasks)
@@ -75,24 +77,27 @@ def test_the_records_are_the_saved_policies_played_in_the_numpy_env(tmp_path: Pa
     assert [r["records"] for r in again] == [r["records"] for r in results]
 
 
-def test_dr_mismatch_trains_on_the_randomized_plant(tmp_path: Path) -> None:
-    """The dr-mismatch regime trains on every randomizable parameter drawn with the
-    condition's middle spread (what the SB3 backend trains on), recorded in the run."""
-    (group,) = groups([_task(tmp_path, "true", "dr-mismatch")])
-    run_group(group)
-    recorded = json.loads((group_folder(group) / "results.json").read_text())
+def test_the_randomised_regimes_train_on_their_condition(tmp_path: Path) -> None:
+    """dr-mismatch trains on every randomizable parameter drawn with the condition's middle
+    spread, dr-dropout with the sensor losing 30 % of the readings — what the SB3 backend
+    trains on — recorded in the run."""
+    (mismatch,) = groups([_task(tmp_path, "true", "dr-mismatch")])
+    (dropout,) = groups([_task(tmp_path, "ekf", "dr-dropout")])
+    for group in (mismatch, dropout):
+        run_group(group)
+    recorded = json.loads((group_folder(mismatch) / "results.json").read_text())
     assert recorded["env_kwargs"]["randomize"] == {"mu": 0.1, "thrust_max": 0.1}
+    recorded = json.loads((group_folder(dropout) / "results.json").read_text())
+    assert recorded["env_kwargs"]["sensor_faults"] == {"dropout": 0.3}
 
 
-def test_the_quick_benchmark_runs_and_says_what_it_left_out(tmp_path: Path) -> None:
+def test_the_quick_benchmark_runs_every_task(tmp_path: Path) -> None:
     report = run_benchmark(tmp_path, quick=True, plants=[ORBIT], conditions=["dropout"],
                            learned_backend="jax", progress=False)
     tasks = learned_tasks([ORBIT], ["dropout"], tmp_path, quick=True)
-    trained = [t for t in tasks if refusal(t) is None]
-    assert report["learned_tasks"] == len(trained) > 0
-    assert report["machine"]["learned_backend"] == "jax"
-    assert any("dr-dropout" in s for s in report["learned_skipped"])
-    text = (tmp_path / "REPORT.md").read_text()
-    assert "trained with the JAX backend" in text and "Left out of the learned grid" in text
+    assert report["learned_tasks"] == len(tasks) > 0
+    assert {t.regime for t in tasks} == {"nominal", "dr-dropout"}
+    assert report["machine"]["learned_backend"] == "jax" and report["learned_skipped"] == []
+    assert "trained with the JAX backend" in (tmp_path / "REPORT.md").read_text()
     with pytest.raises(ValueError, match="learned_backend must be"):
         run_benchmark(tmp_path, quick=True, plants=[ORBIT], learned_backend="torch")
