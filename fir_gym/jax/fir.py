@@ -61,8 +61,21 @@ numpy filter's: the growing window (the bank's window 0) without a prior, and, b
 determines the state, the prior propagated open loop (``A x + B u``, ``A P Aᵀ + Q`` from
 ``x0, P0``); its covariances are symmetrised as there.
 
-**Not here** (options the envs do not use): missing or gated measurements, restarts of
-some systems of a batch, ``form="predictor"``, ``nominal="reanchor"``, ``startup="diffuse"``
+**Missing measurements** (``missing=``, a traced bool; the numpy ``step(None)`` — what
+:class:`fir_gym.wrappers.EstimatorObservation` does where ``info["measurement_missing"]``,
+the reset's reading included): the sample stays in the window as a gap. Every window skips
+it (:meth:`WindowBank.update` with ``valid`` False leaves ``Z`` as it is), everything else
+moves on as at any step (the nominal, the windows' time update, the window that starts, the
+step count), the oldest window is read out from its remaining data, and the NIS is NaN. So a
+missing ``y[0]`` gives the prior ``(x0, P0)`` back; a full window whose data no longer
+determine the state — a run of misses as long as the window, or the few steps after it —
+takes the rank-deficient fallback; the linear FIR's full window with a gap is its two-stage
+estimate over the rest (:func:`fir_gym.estimators.fir.masked_window_estimate`), without one
+its fixed gain (:class:`FIRMemory` keeps the step of the newest miss to tell). ``missing``
+left at its default ``False`` traces no select at all: the program is the one without it.
+
+**Not here** (options the envs do not use): gated measurements, restarts of some systems
+of a batch, ``form="predictor"``, ``nominal="reanchor"``, ``startup="diffuse"``
 for the EFIR, a time-varying model or a prior on the window for the FIR; nor the numpy
 constructors' host-side check that the horizon reaches the observability index (a JAX
 filter with too short a window just falls back every step).
@@ -95,6 +108,17 @@ from .kalman import symmetrize
 RANK_RTOL = 1e-12
 #: :data:`fir_gym.estimators._consistency.MAX_ESTIMATE`: the growth bound's default
 MAX_ESTIMATE = 1e12
+
+
+def unless_missing(missing: jax.Array | bool, kept: jax.Array | float, new: jax.Array
+                   ) -> jax.Array:
+    """``kept`` where this step's measurement is ``missing``, else ``new``: a ``jnp.where``
+    on the traced flag, and ``new`` itself (no select in the trace) when ``missing`` is the
+    literal ``False`` — the default, so a caller without missing measurements gets the very
+    program it got before."""
+    if missing is False:
+        return new
+    return jnp.where(missing, kept, new)
 
 
 # ---------------------------------------------------------------------------- the window bank
@@ -266,10 +290,14 @@ def efir_start(x0: jax.Array, P0: jax.Array, horizon: int, model: FilterModel | 
 
 
 def _advance(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array | None,
-             model: FilterModel, max_estimate: float
+             model: FilterModel, max_estimate: float, missing: jax.Array | bool = False
              ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
     """One pass of :meth:`ExtendedFIRFilter._advance` (preceded by the NIS of
-    :meth:`WindowedEstimator._numpy_pass`); ``u`` is ``None`` at the reset's update."""
+    :meth:`WindowedEstimator._numpy_pass`); ``u`` is ``None`` at the reset's update. A
+    ``missing`` measurement (the numpy ``step(None)``: ``valid`` False) is skipped by every
+    window (:meth:`WindowBank.update` with ``valid``: ``Z`` unchanged) and its NIS is NaN
+    (:func:`fir_gym.estimators._consistency.innovation_nis`); the step is otherwise the same
+    — the nominal and the windows move on, a window starts, the oldest is read out."""
     L = memory.Z.shape[0]
     k, Z, nominal = memory.k, memory.Z, memory.nominal
     H, R, Q = jnp.asarray(model.H), jnp.asarray(model.R), jnp.asarray(model.Q)
@@ -279,14 +307,14 @@ def _advance(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array, u: ja
     else:
         x_pred, F_hat = model.f_and_F(x, u)
         P_pred = F_hat @ P @ F_hat.T + Q
-    nis = innovation_nis(P_pred, y - H @ x_pred, H, R)
+    nis = unless_missing(missing, jnp.nan, innovation_nis(P_pred, y - H @ x_pred, H, R))
     start = k < L - 1                                 # the window is not yet full
     w_out = jnp.maximum(0, k - L + 1) % L             # the oldest window: read out now
     if u is not None:                                 # nominal and perturbation time update
         nominal, A = model.f_and_F(nominal, u)
         Z = bank_predict(Z, A, Q)
     Z = bank_restart(Z, k % L)
-    Z = bank_update(Z, H, R, y - H @ nominal)
+    Z = unless_missing(missing, Z, bank_update(Z, H, R, y - H @ nominal))
     dx, P_new, regular = bank_estimate(Z, w_out)
     dx_prior, P_prior, _ = bank_estimate(Z, w_out, memory.P0)
     dx = jnp.where(start, dx_prior, dx)
@@ -304,22 +332,31 @@ def _advance(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array, u: ja
 
 
 def efir_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
-                model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                model: FilterModel, max_estimate: float = MAX_ESTIMATE, *,
+                missing: jax.Array | bool = False
                 ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
     """The first step from the prior ``(x, P) = (x0, P0)`` with ``y[0]`` (the numpy
     filter's ``_update``, as :meth:`fir_gym.wrappers.EstimatorObservation.reset` calls it
     on a fresh memory): ``(memory, x, P, nis)``, NaN in ``x`` and ``P`` where the numpy
-    watch would flag the estimate (non-finite, or a component beyond ``max_estimate``)."""
-    return _advance(memory, x, P, y, None, model, max_estimate)
+    watch would flag the estimate (non-finite, or a component beyond ``max_estimate``).
+    ``missing`` (a traced bool): ``y`` did not arrive (the numpy ``step(None)``; ``y`` is
+    then ignored, whatever it holds): the window that began at ``x0`` holds no data, so the
+    estimate is the prior itself, ``(x0, P0)``, and the NIS NaN."""
+    return _advance(memory, x, P, y, None, model, max_estimate, missing)
 
 
 def efir_predict_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
-                        u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                        u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE,
+                        *, missing: jax.Array | bool = False
                         ) -> tuple[EFIRMemory, jax.Array, jax.Array, jax.Array]:
     """One env step: the previous estimate ``(x, P)`` (the watch's record), the new
     measurement ``y`` and the applied action ``u`` (``_predict_update``):
-    ``(memory, x, P, nis)`` as :func:`efir_update`."""
-    return _advance(memory, x, P, y, u, model, max_estimate)
+    ``(memory, x, P, nis)`` as :func:`efir_update`. ``missing`` (a traced bool): no ``y``
+    this step (the numpy ``step(None, u)``): the windows skip it and the oldest is read out
+    as ever — from the rest of its data (the prior's window through start-up; a full window
+    whose data no longer determine the state falls back to the prediction ``f(x̂, u)``,
+    ``F P Fᵀ + Q``) — and the NIS is NaN."""
+    return _advance(memory, x, P, y, u, model, max_estimate, missing)
 
 
 # ---------------------------------------------------------------------------- the linear FIR
@@ -327,8 +364,10 @@ def efir_predict_update(memory: EFIRMemory, x: jax.Array, P: jax.Array, y: jax.A
 class FIRMemory:
     """What the linear FIR filter keeps beyond its estimate: the bank ``Z`` (``horizon``
     windows), the number ``k`` of measurements consumed, the prior ``x_open``, ``P_open``
-    propagated open loop through the start-up, and the last step's ``startup`` and
-    ``rank_deficient`` flags."""
+    propagated open loop through the start-up, the last step's ``startup`` and
+    ``rank_deficient`` flags, and ``last_missing``, the step of the newest missing
+    measurement (−1: none yet) — whether the window has a gap (the numpy filter's ring of
+    validity flags, ``FIRFilter._vbuf``)."""
 
     Z: Any
     k: Any
@@ -336,6 +375,7 @@ class FIRMemory:
     P_open: Any
     startup: Any
     rank_deficient: Any
+    last_missing: Any
 
 
 def fir_start(x0: jax.Array, P0: jax.Array, horizon: int, model: FilterModel | None = None
@@ -345,14 +385,24 @@ def fir_start(x0: jax.Array, P0: jax.Array, horizon: int, model: FilterModel | N
     x0 = jnp.asarray(x0, dtype=jnp.float64)
     return FIRMemory(Z=bank_start(int(horizon), x0.shape[0]), k=jnp.asarray(0, dtype=jnp.int64),
                      x_open=x0, P_open=jnp.asarray(P0, dtype=jnp.float64),
-                     startup=jnp.asarray(True), rank_deficient=jnp.asarray(False))
+                     startup=jnp.asarray(True), rank_deficient=jnp.asarray(False),
+                     last_missing=jnp.asarray(-1, dtype=jnp.int64))
 
 
 def _fir_advance(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
-                 u: jax.Array | None, model: FilterModel, max_estimate: float
+                 u: jax.Array | None, model: FilterModel, max_estimate: float,
+                 missing: jax.Array | bool = False
                  ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
     """One pass of :meth:`fir_gym.estimators.fir.FIRFilter._advance` for a time-invariant
-    linear model (preceded by its NIS); ``u`` is ``None`` at the reset's update."""
+    linear model (preceded by its NIS); ``u`` is ``None`` at the reset's update.
+
+    A ``missing`` measurement (the numpy ``step(None)``, ``valid`` False) is skipped by
+    every window (the numpy growing window's :meth:`WindowBank.update` with ``valid``; the
+    ring buffer's slot marked invalid, ``FIRFilter._push``) and its NIS is NaN. A full
+    window is the numpy filter's fixed gain where it has no gap — always regular — and,
+    where it has one, the two-stage estimate over its remaining data
+    (:func:`fir_gym.estimators.fir.masked_window_estimate`), whose information may be
+    singular: then, as through the start-up, the rank-deficient fallback."""
     L = memory.Z.shape[0]
     k, Z = memory.k, memory.Z
     H, R, Q = jnp.asarray(model.H), jnp.asarray(model.R), jnp.asarray(model.Q)
@@ -367,31 +417,38 @@ def _fir_advance(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
         x_open = jnp.where(start, A @ x_open + Bu, x_open)
         P_open = jnp.where(start, A @ P_open @ A.T + Q, P_open)
         Z = bank_predict(Z, A, Q, Bu)
-    nis = innovation_nis(P_pred, y - H @ x_pred, H, R)
+    nis = unless_missing(missing, jnp.nan, innovation_nis(P_pred, y - H @ x_pred, H, R))
     Z = bank_restart(Z, k % L)
-    Z = bank_update(Z, H, R, y)
+    Z = unless_missing(missing, Z, bank_update(Z, H, R, y))
     x_new, P_new, regular = bank_estimate(Z, jnp.maximum(0, k - L + 1) % L)
-    ok = regular | ~start                             # a full window: the fixed gain's
+    last_missing = memory.last_missing if missing is False else jnp.where(
+        missing, k, memory.last_missing)
+    gap = last_missing > k - L                        # a missing one in y[k−L+1..k]
+    ok = regular | (~start & ~gap)                    # a full window: the fixed gain's
     x_fall = jnp.where(start, x_open, x_pred)
     P_fall = jnp.where(start, P_open, P_pred)
     x_new = jnp.where(ok, x_new, x_fall)
     P_new = symmetrize(jnp.where(ok, P_new, P_fall))
     grown = ~(jnp.max(jnp.abs(x_new)) <= max_estimate)
     memory = FIRMemory(Z=Z, k=k + 1, x_open=x_open, P_open=P_open, startup=start,
-                       rank_deficient=~ok)
+                       rank_deficient=~ok, last_missing=last_missing)
     return memory, jnp.where(grown, jnp.nan, x_new), jnp.where(grown, jnp.nan, P_new), nis
 
 
 def fir_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
-               model: FilterModel, max_estimate: float = MAX_ESTIMATE
+               model: FilterModel, max_estimate: float = MAX_ESTIMATE, *,
+               missing: jax.Array | bool = False
                ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
     """The linear FIR filter's first step from the prior with ``y[0]`` (as
-    :func:`efir_update`)."""
-    return _fir_advance(memory, x, P, y, None, model, max_estimate)
+    :func:`efir_update`; a ``missing`` ``y[0]`` leaves the growing window empty: the
+    estimate is the prior ``(x0, P0)``, the NIS NaN)."""
+    return _fir_advance(memory, x, P, y, None, model, max_estimate, missing)
 
 
 def fir_predict_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
-                       u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE
+                       u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE,
+                       *, missing: jax.Array | bool = False
                        ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
-    """One env step of the linear FIR filter (as :func:`efir_predict_update`)."""
-    return _fir_advance(memory, x, P, y, u, model, max_estimate)
+    """One env step of the linear FIR filter (as :func:`efir_predict_update`, ``missing``
+    included: :func:`_fir_advance` says what a missing measurement does)."""
+    return _fir_advance(memory, x, P, y, u, model, max_estimate, missing)

@@ -6,7 +6,9 @@ reference) with its defaults — :class:`~fir_gym.estimators.unscented.MerweScal
 :class:`~fir_gym.wrappers.EstimatorObservation` runs it (``estimator="ukf"``): ``reset``
 consumes ``y[0]`` with an update only (:func:`ukf_update`, the reference's ``_update``),
 each ``step`` predicts with the applied action and updates (:func:`ukf_predict_update`,
-its ``_predict_update``). The model is a :class:`~fir_gym.jax._plant.FilterModel`: ``f``
+its ``_predict_update``). A step whose measurement is missing (``missing=``, a traced
+bool: the numpy ``step(None)``) predicts only: ``x⁻, P⁻`` (at the reset the prior) and a
+NaN NIS. The model is a :class:`~fir_gym.jax._plant.FilterModel`: ``f``
 on the sigma points, the linear measurement ``H``, ``Q`` and ``R``.
 
 **Scaled unscented transform** (paper 003, Table 1 and eq 6; Wan & van der Merwe 2000):
@@ -203,10 +205,14 @@ def _weights(n: int, weights: SigmaWeights | None) -> SigmaWeights:
 
 
 def ukf_correct(x: jax.Array, P: jax.Array, X: jax.Array, y: jax.Array, model: FilterModel,
-                weights: SigmaWeights) -> tuple[jax.Array, jax.Array, jax.Array]:
+                weights: SigmaWeights, *, missing: jax.Array | bool = False
+                ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """The measurement update of ``N(x, P)`` from its points ``X (N, n)`` with ``y``
     (``UnscentedKalmanFilter._correct``): ``(x⁺, P⁺, nis)``, NaN where ``S`` is not positive
-    definite (or the points are NaN)."""
+    definite (or the points are NaN). ``missing`` (a traced bool): ``y`` did not arrive —
+    ``x, P`` are kept and the NIS is NaN (the reference's
+    :func:`~fir_gym.estimators.kalman.keep_usable` with ``valid`` False), whatever ``y``
+    holds; the literal ``False`` (the default) traces no select."""
     Z = X @ model.H.T
     y_hat, DZ, dz, cz = _moments(Z, weights)
     _, DX, dx, cx = _moments(X, weights)
@@ -219,18 +225,22 @@ def ukf_correct(x: jax.Array, P: jax.Array, X: jax.Array, y: jax.Array, model: F
     x_new = x + K @ e
     P_new = psd_rebuild(symmetrize(P - K @ Pxz.T))
     nis = (W @ e) @ e
-    return x_new, P_new, nis
+    if missing is False:
+        return x_new, P_new, nis
+    return (jnp.where(missing, x, x_new), jnp.where(missing, P, P_new),
+            jnp.where(missing, jnp.nan, nis))
 
 
 def ukf_update(x: jax.Array, P: jax.Array, y: jax.Array, model: FilterModel,
-               weights: SigmaWeights | None = None
+               weights: SigmaWeights | None = None, *, missing: jax.Array | bool = False
                ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """The measurement update alone, from points drawn at ``(x, P)`` — the env's reset
     (``EstimatorObservation.reset``: the filter at its prior consumes ``y[0]``;
     ``UnscentedKalmanFilter._update``): ``(x⁺, P⁺, nis)``. ``weights`` default to
-    :func:`merwe_weights` of the state's size."""
+    :func:`merwe_weights` of the state's size. A ``missing`` ``y[0]`` (the numpy
+    ``step(None)``) keeps the prior ``(x, P)``, NIS NaN."""
     w = _weights(x.shape[-1], weights)
-    return ukf_correct(x, P, sigma_points(x, P, w), y, model, w)
+    return ukf_correct(x, P, sigma_points(x, P, w), y, model, w, missing=missing)
 
 
 def ukf_predict(x: jax.Array, P: jax.Array, u: jax.Array, model: FilterModel,
@@ -248,12 +258,14 @@ def ukf_predict(x: jax.Array, P: jax.Array, u: jax.Array, model: FilterModel,
 
 def ukf_predict_update(x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array,
                        model: FilterModel, weights: SigmaWeights | None = None,
-                       redraw: bool = True) -> tuple[jax.Array, jax.Array, jax.Array]:
+                       redraw: bool = True, *, missing: jax.Array | bool = False
+                       ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """One env step (``EstimatorObservation.step`` with the applied action ``u``;
     ``UnscentedKalmanFilter._predict_update``): :func:`ukf_predict`, then
     :func:`ukf_correct` from points redrawn at ``(x⁻, P⁻)`` (``redraw=False``: the
-    propagated points, paper 003's Table 2). Returns ``(x⁺, P⁺, nis)``."""
+    propagated points, paper 003's Table 2). Returns ``(x⁺, P⁺, nis)``; where ``missing``
+    (the numpy ``step(None, u)``) the prediction ``(x⁻, P⁻)`` and a NaN NIS."""
     w = _weights(x.shape[-1], weights)
     x_pred, P_pred, Xf = ukf_predict(x, P, u, model, w)
     X_pred = sigma_points(x_pred, P_pred, w) if redraw else Xf
-    return ukf_correct(x_pred, P_pred, X_pred, y, model, w)
+    return ukf_correct(x_pred, P_pred, X_pred, y, model, w, missing=missing)

@@ -53,12 +53,16 @@ def relative_error(got: np.ndarray, want: np.ndarray) -> float:
 PUBLISHED = ("model", "initial_state", "initial_state_cov", "default_horizon")
 
 
-def replay(ys: np.ndarray, applied: np.ndarray, plant: Any = None) -> Any:
+def replay(ys: np.ndarray, applied: np.ndarray, plant: Any = None,
+           missing: np.ndarray | None = None) -> Any:
     """A numpy env (a :class:`gymnasium.Env`) replaying recorded measurements ``ys`` (the
     reset's first) and reporting the recorded applied actions ``applied`` in
     ``info["action"]`` — what the numpy wrappers (``MeasurementStack``,
     ``EstimatorObservation``) read — and, given a numpy ``plant``, publishing its
-    :data:`PUBLISHED` attributes."""
+    :data:`PUBLISHED` attributes. Given ``missing`` (one bool per reading, the reset's
+    first), the reset's and every step's ``info["measurement_missing"]`` report it, as
+    :class:`fir_gym.wrappers.SensorFaults` does (``EstimatorObservation`` then gives its
+    filter no measurement there)."""
     import gymnasium as gym
     from gymnasium import spaces
 
@@ -72,10 +76,14 @@ def replay(ys: np.ndarray, applied: np.ndarray, plant: Any = None) -> Any:
 
         def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
             self.k = 0
-            return self.ys[0], {}
+            return self.ys[0], self.faults()
 
         def step(self, action: Any) -> Any:
             self.k += 1
-            return self.ys[self.k], 0.0, False, False, {"action": self.applied[self.k - 1]}
+            info = {"action": self.applied[self.k - 1], **self.faults()}
+            return self.ys[self.k], 0.0, False, False, info
+
+        def faults(self) -> dict[str, Any]:
+            return {} if missing is None else {"measurement_missing": bool(missing[self.k])}
 
     return Replay()
