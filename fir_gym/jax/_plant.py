@@ -209,7 +209,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         u = jax.random.uniform(jax.random.fold_in(key, FAULT_STREAM), dtype=jnp.float64)
         return u < self.dropout
 
-    def deliver(self, missing: jax.Array, y: jax.Array, held: jax.Array) -> jax.Array:
+    def deliver(self, missing: jax.Array | bool, y: jax.Array, held: jax.Array) -> jax.Array:
         """The reading delivered: ``y``, or ``held`` (the last delivered, or at a reset
         :meth:`first_hold`) where it is missing."""
         return y if not self.dropout else jnp.where(missing, held, y)
@@ -220,7 +220,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return self.filter_model(params).H @ jnp.asarray(params.initial_state,
                                                           dtype=jnp.float64)
 
-    def own_update(self, missing: jax.Array, before: Any, updated: Any, x_pred: jax.Array,
+    def own_update(self, missing: jax.Array | bool, before: Any, updated: Any, x_pred: jax.Array,
                    P_pred: jax.Array, params: Any) -> Any:
         """The plant's own filter after a step: ``updated`` (the state after the update with
         the delivered reading and its watch), or where the reading is missing the
