@@ -283,7 +283,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             memory, x, P, nis = kind.update(memory, state.filter_x, state.filter_P, state.y,
                                             self.filter_model(params), self.options, **extra)
             state = watch_state(state.replace(memory=memory), x, P, nis,
-                                watch_limits_of(params), ~jnp.asarray(missing))
+                                watch_limits_of(params), kind.reports_nis & ~jnp.asarray(missing))
         return state
 
     def finish_step(self, old: Any, new: Any, u: jax.Array, params: Any,
@@ -305,7 +305,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
                                                     new.y, u, self.filter_model(params),
                                                     self.options, **extra)
             new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params),
-                              ~jnp.asarray(missing))
+                              kind.reports_nis & ~jnp.asarray(missing))
         if self.dropout:
             info["measurement_missing"] = jnp.asarray(missing)
         if self.kind in self.filter_kinds:

@@ -7,7 +7,7 @@ episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` s
 the windowed filters' horizon), its kinds per plant those of the robustness benchmark's
 learned grid on the nominal plant (:data:`fir_gym.robustness.plan.PLAIN_KINDS` and the
 plant's ``learned_estimators``: the rows of README.md's benchmark table) that the plant has
-in :data:`fir_gym.jax.registry.PLANTS` — all but ``recurrent`` (and ``ufir``); PPO with the
+in :data:`fir_gym.jax.registry.PLANTS` — all but ``recurrent``; PPO with the
 shipped recipe (:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds'
 mean returns and its 95 % interval from the same bootstrap as the SB3 benchmark's
 (:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), on the JAX env's
@@ -35,7 +35,8 @@ from .registry import PLANTS as JAX_PLANTS
 from .train import save, train
 
 #: the benchmark's learned kinds the JAX backend trains (every plant has a subset: its kinds)
-JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf", "ukf", "efir", "fir")
+JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf", "ukf", "efir", "fir",
+             "ufir")
 
 
 def benchmark_plan(*, quick: bool = False, seeds: int | None = None,

@@ -1,8 +1,9 @@
 """CarrierMotion-v0 as a gymnax environment: paper 001's deck motion, with its KF in the state.
 
 The JAX twin of :class:`fir_gym.envs.carrier_motion.CarrierMotionEnv` (the numpy reference)
-seen through :func:`fir_gym.wrappers.factory.wrap_observation` — one of three observation
-kinds:
+seen through :func:`fir_gym.wrappers.factory.wrap_observation` — one of its observation
+kinds (:data:`KINDS`; ``"measurement-stack"`` and the generic filters ``"ukf"``, ``"fir"``
+and ``"ufir"`` as on every plant, :class:`~fir_gym.jax._plant.FilteredPlant`):
 
 * ``"true"``: the true state ``[x1, x2]`` (deck displacement and rate;
   :class:`~fir_gym.wrappers.baselines.TrueStateObservation`);
@@ -118,7 +119,7 @@ PAPER_NOISE_INPUT = (0.6, -0.036)
 #: the numpy plant's worst per-step cost (``CarrierMotionEnv.cost_cap``)
 COST_CAP = 100.0
 #: the observation kinds (the estimator kind last)
-KINDS = ("true", "measurement", "measurement-stack", "kf", "ukf", "fir")
+KINDS = ("true", "measurement", "measurement-stack", "kf", "ukf", "fir", "ufir")
 #: the parameters ``nominal=`` may change (the numpy plant's ``params``)
 MODEL_PARAMETERS = ("sample_period", "q", "v", "delta22", "delta_c", "a21", "a22",
                     "noise_input")

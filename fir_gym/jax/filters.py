@@ -13,7 +13,10 @@ static), the memory it keeps beyond the mean and covariance (a pytree in the env
 * ``"efir"`` — :mod:`fir_gym.jax.fir` (:class:`~fir_gym.estimators.efir.ExtendedFIRFilter`
   as the env builds it; option ``horizon``);
 * ``"fir"`` — :mod:`fir_gym.jax.fir` (:class:`~fir_gym.estimators.fir.FIRFilter`, linear
-  plants; option ``horizon``).
+  plants; option ``horizon``);
+* ``"ufir"`` — :mod:`fir_gym.jax.fir` (:class:`~fir_gym.estimators.ufir.UFIRFilter`, the
+  unbiased FIR filter of linear plants: the FIR on the model with ``Q = 0``, ``R = I``;
+  option ``horizon``; no NIS, :attr:`FilterKind.reports_nis`).
 
 **Missing measurements.** ``update`` and ``predict_update`` take ``missing`` (a traced
 bool, default ``False``): the step's reading did not arrive, and the kind does what its
@@ -76,6 +79,9 @@ class FilterKind:
     start: Callable[[jax.Array, jax.Array, Mapping[str, Any]], Any]
     update: Update
     predict_update: PredictUpdate
+    #: whether the filter hands the divergence watch a NIS (the UFIR has none: its NaN
+    #: never counts as high)
+    reports_nis: bool = True
 
     def check(self, n_x: int, options: Mapping[str, Any]) -> None:
         """ValueError naming a bad option value (the names and defaults are the env's
@@ -110,7 +116,7 @@ UKF = FilterKind(
 
 
 def _windowed(start: Callable[..., Any], update: Callable[..., Result],
-              predict_update: Callable[..., Result]) -> FilterKind:
+              predict_update: Callable[..., Result], reports_nis: bool = True) -> FilterKind:
     """A FIR-family filter of :mod:`fir_gym.jax.fir`: one option, ``horizon`` (the bank's
     length), which only its memory's start needs."""
 
@@ -126,11 +132,12 @@ def _windowed(start: Callable[..., Any], update: Callable[..., Result],
 
     return FilterKind(options={"horizon": None},
                       start=lambda x0, P0, options: start(x0, P0, options["horizon"]),
-                      update=kind_update, predict_update=kind_step)
+                      update=kind_update, predict_update=kind_step, reports_nis=reports_nis)
 
 
 EFIR = _windowed(fir.efir_start, fir.efir_update, fir.efir_predict_update)
 FIR = _windowed(fir.fir_start, fir.fir_update, fir.fir_predict_update)
+UFIR = _windowed(fir.fir_start, fir.ufir_update, fir.ufir_predict_update, reports_nis=False)
 
 #: the generic filter kinds by name (the numpy registry's names)
-GENERIC_FILTERS: dict[str, FilterKind] = {"ukf": UKF, "efir": EFIR, "fir": FIR}
+GENERIC_FILTERS: dict[str, FilterKind] = {"ukf": UKF, "efir": EFIR, "fir": FIR, "ufir": UFIR}

@@ -74,6 +74,16 @@ estimate over the rest (:func:`fir_gym.estimators.fir.masked_window_estimate`), 
 its fixed gain (:class:`FIRMemory` keeps the step of the newest miss to tell). ``missing``
 left at its default ``False`` traces no select at all: the program is the one without it.
 
+**The unbiased FIR filter** (:func:`ufir_update`, :func:`ufir_predict_update`; memory
+:func:`fir_start`'s): :class:`fir_gym.estimators.ufir.UFIRFilter` as the envs build it
+(``method="batch"``) — Shmaliy's filter, which needs no noise statistics, is the linear FIR
+filter of the model with ``Q = 0`` and ``R = I`` (:func:`unbiased_model`; the numpy class
+is built that way, ``UFIRFilter._fir_model``), its covariance reported as the noise power
+gain times ``r̄``, the mean of the model's own ``diag R`` (``noise_scale``), except where the
+window fell back (rank deficient: the fallback's ``P`` as it is), and no NIS (NaN: the numpy
+filter hands its watch none, so no run of high NIS can flag it; the kind says so,
+:attr:`fir_gym.jax.filters.FilterKind.reports_nis`).
+
 **Not here** (options the envs do not use): gated measurements, restarts of some systems
 of a batch, ``form="predictor"``, ``nominal="reanchor"``, ``startup="diffuse"``
 for the EFIR, a time-varying model or a prior on the window for the FIR; nor the numpy
@@ -452,3 +462,42 @@ def fir_predict_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Arr
     """One env step of the linear FIR filter (as :func:`efir_predict_update`, ``missing``
     included: :func:`_fir_advance` says what a missing measurement does)."""
     return _fir_advance(memory, x, P, y, u, model, max_estimate, missing)
+
+
+# ---------------------------------------------------------------------------- the UFIR
+def unbiased_model(model: FilterModel) -> FilterModel:
+    """``model`` with ``Q = 0`` and ``R = I``: the model whose linear FIR filter is the
+    unbiased FIR filter (:meth:`fir_gym.estimators.ufir.UFIRFilter._fir_model`)."""
+    n, p = jnp.asarray(model.Q).shape[0], jnp.asarray(model.R).shape[0]
+    return FilterModel(model.f, model.f_and_F, model.H, jnp.zeros((n, n)), jnp.eye(p))
+
+
+def _unbiased(memory: FIRMemory, x: jax.Array, P: jax.Array, model: FilterModel
+              ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """The UFIR's output from the FIR step on :func:`unbiased_model`: ``P`` scaled by
+    ``r̄ = mean diag R`` where the window's estimate stands (:meth:`fir_gym.estimators.ufir.
+    UFIRFilter._advance`), no NIS."""
+    r_bar = jnp.mean(jnp.diag(jnp.asarray(model.R)))
+    return memory, x, jnp.where(memory.rank_deficient, P, r_bar * P), jnp.asarray(jnp.nan)
+
+
+def ufir_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                model: FilterModel, max_estimate: float = MAX_ESTIMATE, *,
+                missing: jax.Array | bool = False
+                ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """The unbiased FIR filter's first step from the prior with ``y[0]`` (:func:`fir_update`
+    on :func:`unbiased_model`)."""
+    memory, x, P, _ = _fir_advance(memory, x, P, y, None, unbiased_model(model), max_estimate,
+                                   missing)
+    return _unbiased(memory, x, P, model)
+
+
+def ufir_predict_update(memory: FIRMemory, x: jax.Array, P: jax.Array, y: jax.Array,
+                        u: jax.Array, model: FilterModel, max_estimate: float = MAX_ESTIMATE,
+                        *, missing: jax.Array | bool = False
+                        ) -> tuple[FIRMemory, jax.Array, jax.Array, jax.Array]:
+    """One env step of the unbiased FIR filter (:func:`fir_predict_update` on
+    :func:`unbiased_model`)."""
+    memory, x, P, _ = _fir_advance(memory, x, P, y, u, unbiased_model(model), max_estimate,
+                                   missing)
+    return _unbiased(memory, x, P, model)
