@@ -16,6 +16,11 @@ and training times and the training rate. Given an SB3 benchmark (``--compare-wi
 folder, or a Markdown file of its tables such as its ``BENCHMARK.md`` or README.md's
 benchmark section), each row stands beside the SB3 row of the same plant and kind, with the
 verdict: is the numpy-env IQM inside the SB3 interval?
+
+The classical ``lqg`` row (the LQR of the plant's nominal model on the EKF's estimate, as the
+SB3 benchmark runs it: nothing to train) is the numpy env's own —
+:func:`fir_gym.training.evaluation.evaluate` on the same episodes — so the table has every
+kind of README.md's but ``recurrent``; it has no JAX-env column, no times.
 """
 
 from __future__ import annotations
@@ -39,18 +44,25 @@ JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf", "ukf", "ef
              "ufir")
 
 
-def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
-                   plants: list[str] | None = None, kinds: list[str] | None = None
-                   ) -> list[dict[str, Any]]:
-    """Every (plant, kind) job: ``env_id``, ``kind``, ``seeds``, ``steps``, ``env_kwargs``,
-    ``kind_kwargs`` (the SB3 benchmark's, e.g. the windowed filters' horizon), ``episodes``.
-    Refuses a plant the JAX backend or the benchmark does not have."""
+def chosen_plants(plants: list[str] | None = None) -> list[str]:
+    """``plants`` checked (default: the benchmark's plants the JAX backend has); a
+    ``ValueError`` naming them otherwise."""
     chosen = list(plants) if plants else [p for p in PLANTS if p in JAX_PLANTS]
     for env_id in chosen:
         if env_id not in PLANTS or env_id not in JAX_PLANTS:
             raise ValueError(f"plants must be among the benchmark's plants the jax backend "
                              f"has ({', '.join(p for p in PLANTS if p in JAX_PLANTS)}); got "
                              f"{env_id!r}")
+    return chosen
+
+
+def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
+                   plants: list[str] | None = None, kinds: list[str] | None = None
+                   ) -> list[dict[str, Any]]:
+    """Every (plant, kind) job: ``env_id``, ``kind``, ``seeds``, ``steps``, ``env_kwargs``,
+    ``kind_kwargs`` (the SB3 benchmark's, e.g. the windowed filters' horizon), ``episodes``.
+    Refuses a plant the JAX backend or the benchmark does not have."""
+    chosen = chosen_plants(plants)
     n_seeds = seeds or (QUICK["seeds"] if quick else SEEDS)
     jobs = []
     for env_id in chosen:
@@ -79,6 +91,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
     jobs = benchmark_plan(quick=quick, seeds=seeds, plants=plants, kinds=kinds)
     start = time.perf_counter()
     rows = []
+    classical = chosen_plants(plants) if kinds is None or "lqg" in kinds else []
     for i, job in enumerate(jobs):
         if progress:
             print(f"[{i + 1}/{len(jobs)}] {job['env_id']} {job['kind']}: {job['seeds']} "
@@ -95,6 +108,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
                      "steps_trained": result.steps_trained,
                      "steps_per_second": result.steps_trained * len(result.seeds)
                      / result.train_seconds})
+    for env_id in classical:
+        rows.append(lqg_row(env_id, QUICK["episodes"] if quick else EPISODES))
     tables = summarise(rows, sb3)
     report = {"backend": "jax", "quick": quick, "seconds": time.perf_counter() - start,
               "compare_with": str(compare_with) if compare_with else None, "tables": tables}
@@ -102,6 +117,20 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
     (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "BENCHMARK.md").write_text(markdown(report) + "\n")
     return report
+
+
+def lqg_row(env_id: str, episodes: int, seed: int = EVAL_SEED) -> dict[str, Any]:
+    """The classical ``lqg`` row of ``env_id``: :func:`fir_gym.training.evaluation.evaluate`
+    of the SB3 benchmark's LQG configuration (one run, seed 0) on the numpy env's episodes
+    ``seed + i``; no JAX-env returns, nothing trained."""
+    from fir_gym.training.compare import make_configs
+    from fir_gym.training.evaluation import evaluate
+
+    config = make_configs(env_id, ["lqg"], [0], env_kwargs=PLANTS[env_id]["env_kwargs"])[0]
+    result = evaluate(config, episodes=episodes, seed=seed)
+    return {"env_id": env_id, "kind": "lqg", "seeds": [0], "episode_returns": None,
+            "numpy_returns": [list(map(float, result.returns))], "compile_seconds": 0.0,
+            "train_seconds": 0.0, "steps_trained": 0, "steps_per_second": None}
 
 
 def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
@@ -208,12 +237,15 @@ def summarise(rows: list[dict[str, Any]], sb3: dict[str, dict[str, dict[str, Any
     tables: dict[str, list[dict[str, Any]]] = {}
     for env_id in dict.fromkeys(r["env_id"] for r in rows):
         mine = [r for r in rows if r["env_id"] == env_id]
-        draws = episode_bootstrap({r["kind"]: r["episode_returns"] for r in mine})
+        draws = episode_bootstrap({r["kind"]: r["episode_returns"] for r in mine
+                                   if r["episode_returns"] is not None})
         numpy_draws = episode_bootstrap({r["kind"]: r["numpy_returns"] for r in mine})
         table = []
         for r in mine:
-            centre = iqm([sum(e) / len(e) for e in r["episode_returns"]])
-            low, high = percentile_interval(draws[r["kind"]])
+            centre = low = high = None               # the classical row: no JAX env
+            if r["episode_returns"] is not None:
+                centre = iqm([sum(e) / len(e) for e in r["episode_returns"]])
+                low, high = percentile_interval(draws[r["kind"]])
             on_numpy = iqm([sum(e) / len(e) for e in r["numpy_returns"]])
             numpy_low, numpy_high = percentile_interval(numpy_draws[r["kind"]])
             row = {**r, "iqm": centre, "low": low, "high": high, "numpy_iqm": on_numpy,
@@ -250,10 +282,13 @@ def markdown(report: dict[str, Any]) -> str:
             headers += ["SB3 IQM [95% CI]", "inside"]
         lines = []
         for r in table:
-            line = [r["kind"], len(r["seeds"]), f"{r['iqm']:.4g} [{r['low']:.4g}, "
-                    f"{r['high']:.4g}]", f"{r['numpy_iqm']:.4g} [{r['numpy_low']:.4g}, "
-                    f"{r['numpy_high']:.4g}]", f"{r['compile_seconds']:.1f}",
-                    f"{r['train_seconds']:.1f}", f"{r['steps_per_second']:.3g}"]
+            learned = r["iqm"] is not None
+            line = [r["kind"], len(r["seeds"]),
+                    f"{r['iqm']:.4g} [{r['low']:.4g}, {r['high']:.4g}]" if learned else "—",
+                    f"{r['numpy_iqm']:.4g} [{r['numpy_low']:.4g}, {r['numpy_high']:.4g}]",
+                    f"{r['compile_seconds']:.1f}" if learned else "—",
+                    f"{r['train_seconds']:.1f}" if learned else "—",
+                    f"{r['steps_per_second']:.3g}" if learned else "—"]
             if compare:
                 line += ([f"{r['sb3_iqm']:.4g} [{r['sb3_low']:.4g}, {r['sb3_high']:.4g}]",
                           "yes" if r["inside"] else "no"] if "sb3_iqm" in r else ["—", "—"])

@@ -67,6 +67,22 @@ def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
                                 progress=False)
 
 
+def test_the_lqg_row_is_the_sb3_benchmarks_evaluation(tmp_path: Path) -> None:
+    """The classical row: the SB3 benchmark's LQG job (``run_job``: its configuration,
+    evaluated on the same episodes) gives the same returns; no JAX column, nothing timed."""
+    from fir_gym.training.compare import run_job
+
+    report = benchmark.run_benchmark(tmp_path / "jax", quick=True, plants=["fir_gym/Orbit-v0"],
+                                     kinds=["lqg"], progress=False)
+    (row,) = report["tables"]["fir_gym/Orbit-v0"]
+    assert row["kind"] == "lqg" and row["iqm"] is None and row["seeds"] == [0]
+    (job,) = [j for j in sb3_benchmark.benchmark_jobs(tmp_path / "sb3", quick=True,
+                                                      plants=["fir_gym/Orbit-v0"])
+              if j["config"].observation_kind == "lqg"]
+    assert row["numpy_returns"] == [run_job(job)["returns"]]
+    assert "| lqg " in (tmp_path / "jax" / "BENCHMARK.md").read_text()
+
+
 def test_markdown_tables_read_the_benchmark_section_only() -> None:
     text = """
 *fir_gym/Orbit-v0*
