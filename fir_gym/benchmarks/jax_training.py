@@ -13,7 +13,11 @@ Two ratios, each of env-steps per second measured in the same run as its referen
   native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
   (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 —
   target ≥ 2. The same JAX env stepped with the noise given (``step_with_noise``, no key
-  draws, no auto-reset) is the floor: the plant and the filter alone.
+  draws, no auto-reset) is the floor: the plant and the filter alone. The same ratio is
+  measured again **under the conditions** the learned benchmarks train in (:data:`CONDITIONS`:
+  every randomizable parameter drawn at each reset with spread 0.1, and the sensor losing 30 %
+  of the readings — the EKF predicting through them): on both sides the draws, the held
+  readings and the filter's missing-reading path are in the step.
 
 The PPO ratio's floor is PPO's own cost in JAX: the same program on :func:`free_env`, an
 environment whose step costs nothing — ``free / SB3`` is the best ratio any JAX plant could
@@ -39,6 +43,10 @@ HOVER, GAIN, R_REF = 0.311, 0.5, 8.0
 MODES = ("step", "step_env", "step_with_noise")
 JAX_ENVS = 2048
 NUMPY_BATCHES = (256, 1024, 4096)
+#: the conditions of the second stepping ratio: the robustness benchmark's dr-mismatch and
+#: dr-dropout regimes at once (the plant's ``randomize``, the sensor's ``dropout``)
+CONDITIONS: dict[str, Any] = {"randomize": {"mu": 0.1, "thrust_max": 0.1},
+                              "sensor_faults": {"dropout": 0.3}}
 
 
 def policy(obs: np.ndarray) -> np.ndarray:
@@ -47,16 +55,20 @@ def policy(obs: np.ndarray) -> np.ndarray:
 
 
 def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
-                      mode: str = "step") -> tuple[float, float]:
+                      mode: str = "step", conditions: bool = False) -> tuple[float, float]:
     """(env-steps/s of the jitted, vmapped Orbit+EKF env — best of ``reps`` —, compile
-    seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`."""
+    seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`,
+    ``conditions`` the env under :data:`CONDITIONS` (mode ``"step"`` only)."""
     import jax
     import jax.numpy as jnp
 
-    from fir_gym.jax.orbit import Orbit, OrbitNoise
+    from fir_gym.jax import make
+    from fir_gym.jax.orbit import OrbitNoise
 
-    env = Orbit("ekf")
-    params = env.default_params
+    if conditions and mode != "step":
+        raise ValueError(f"conditions are drawn by the env's step: mode must be 'step'; got "
+                         f"{mode!r}")
+    env, params = make(ENV_ID, "ekf", **(CONDITIONS if conditions else {}))
     zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
 
     def one(key: Any) -> Any:
@@ -74,8 +86,8 @@ def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2
                 obs, state, reward, _, _ = env.step_with_noise(state, action, zero, params)
             return (obs, state), reward
 
-        (_, state), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
-        return state.filter_x, rewards.sum()
+        (obs, _), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
+        return obs, rewards.sum()                  # the estimate (the kind's observation)
 
     run = jax.jit(jax.vmap(one))
     keys = jax.random.split(jax.random.key(0, impl=prng), n_envs)
@@ -91,17 +103,22 @@ def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2
     return n_envs * steps / best, compile_s
 
 
-def numpy_stepping_rate(n_envs: int, steps: int, reps: int) -> float:
-    """Env-steps/s of the native vector env with the batched EKF (best of ``reps``)."""
+def numpy_stepping_rate(n_envs: int, steps: int, reps: int, conditions: bool = False
+                        ) -> float:
+    """Env-steps/s of the native vector env with the batched EKF (best of ``reps``);
+    ``conditions``: under :data:`CONDITIONS` (the plant's ``randomize``, a
+    :class:`~fir_gym.wrappers.VectorSensorFaults`)."""
     import gymnasium as gym
 
-    from fir_gym.wrappers import VectorEstimatorObservation
+    from fir_gym.wrappers import VectorEstimatorObservation, VectorSensorFaults
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        env = VectorEstimatorObservation(
-            gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point"),
-            "ekf")
+        venv: Any = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point",
+                                 **({"randomize": CONDITIONS["randomize"]} if conditions else {}))
+        if conditions:
+            venv = VectorSensorFaults(venv, **CONDITIONS["sensor_faults"])
+        env = VectorEstimatorObservation(venv, "ekf")
         obs, _ = env.reset(seed=0)
         for _ in range(3):                                   # warm up (numba, caches)
             obs = env.step(policy(obs))[0]
@@ -248,6 +265,9 @@ def run(quick: bool = False) -> dict[str, Any]:
     n_envs = 256 if quick else JAX_ENVS
     stepping, compile_s = jax_stepping_rate(n_envs, steps, reps)
     floor, _ = jax_stepping_rate(n_envs, steps, reps, mode="step_with_noise")
+    numpy_faulty = numpy_stepping_rate(best_batch, max(5, steps * 256 // best_batch), reps,
+                                       conditions=True)
+    faulty, _ = jax_stepping_rate(n_envs, steps, reps, conditions=True)
     return {"ppo": {"sb3_steps_per_s": sb3["rate"], "jax_steps_per_s": jax_ppo["rate"],
                     "jax_compile_seconds": jax_ppo["compile_seconds"],
                     "jax_free_steps_per_s": jax_free["rate"],
@@ -257,7 +277,11 @@ def run(quick: bool = False) -> dict[str, Any]:
                          "jax_envs": n_envs, "jax_steps_per_s": stepping,
                          "jax_compile_seconds": compile_s, "jax_given_noise_steps_per_s": floor,
                          "ratio": stepping / numpy_rates[best_batch],
-                         "ceiling": floor / numpy_rates[best_batch]}}
+                         "ceiling": floor / numpy_rates[best_batch]},
+            "stepping_conditions": {"numpy_steps_per_s": numpy_faulty,
+                                    "numpy_batch": best_batch, "jax_envs": n_envs,
+                                    "jax_steps_per_s": faulty,
+                                    "ratio": faulty / numpy_faulty}}
 
 
 def print_results(res: dict[str, Any]) -> None:
@@ -277,7 +301,11 @@ def print_results(res: dict[str, Any]) -> None:
          [f"stepping, JAX {s['jax_envs']} envs / numpy best ({s['numpy_best_batch']} envs)",
           s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_steps_per_s"], s["ratio"],
           "≥ 2", f"noise given, no auto-reset: {s['jax_given_noise_steps_per_s']:.4g} "
-          f"steps/s (ceiling {s['ceiling']:.3g})"]], floatfmt=".4g"))
+          f"steps/s (ceiling {s['ceiling']:.3g})"]]
+        + ([[f"stepping under mismatch 0.1 + dropout 0.3, JAX {c['jax_envs']} envs / numpy "
+             f"{c['numpy_batch']} envs", c["numpy_steps_per_s"], c["jax_steps_per_s"],
+             c["ratio"], "—", "the EKF predicting through the lost readings"]]
+           if (c := res.get("stepping_conditions")) else []), floatfmt=".4g"))
 
 
 def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:

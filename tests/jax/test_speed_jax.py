@@ -25,3 +25,12 @@ def test_the_ppo_rate_runs_with_seeds_vmapped(free: bool) -> None:
 def test_the_stepping_rate_runs(mode: str) -> None:
     rate, compile_seconds = jax_training.jax_stepping_rate(8, 4, 2, mode=mode)
     assert math.isfinite(rate) and rate > 0 and compile_seconds > 0
+
+
+def test_the_stepping_rates_under_the_conditions_run() -> None:
+    """Mismatch and dropout in the step, on both sides (``stepping_conditions``)."""
+    rate, _ = jax_training.jax_stepping_rate(8, 4, 2, conditions=True)
+    numpy_rate = jax_training.numpy_stepping_rate(8, 4, 1, conditions=True)
+    assert math.isfinite(rate) and rate > 0 and math.isfinite(numpy_rate) and numpy_rate > 0
+    with pytest.raises(ValueError, match="mode must be 'step'"):
+        jax_training.jax_stepping_rate(8, 4, 1, mode="step_env", conditions=True)
