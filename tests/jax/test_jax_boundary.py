@@ -45,10 +45,12 @@ def resolved_imports(path: Path) -> dict[str, list[str]]:
 #: the places outside fir_gym.jax that import it, each inside the function that runs it
 #: (nothing at module level): `fir-gym train --backend jax`, `fir-gym benchmark-controllers
 #: --backend jax`, `fir-gym evaluate` on a JAX run folder, and the robustness benchmark's
-#: learned grid with `learned_backend="jax"` (`benchmark-robustness --backend jax`)
+#: learned grid with `learned_backend="jax"` (`benchmark-robustness --backend jax`), and a
+#: JAX run's policy in `fir-gym watch` / `record --policy RUN`
 ALLOWED = {("fir_gym/_commands.py", "train_jax"), ("fir_gym/_commands.py", "benchmark_jax"),
            ("fir_gym/_commands.py", "evaluate_jax"),
-           ("fir_gym/robustness/benchmark.py", "run_benchmark")}
+           ("fir_gym/robustness/benchmark.py", "run_benchmark"),
+           ("fir_gym/episode_policy.py", "trained_policy")}
 #: modules that exist to measure the JAX backend (`fir-gym speed training`): JAX inside their
 #: functions only
 MEASURING = {"fir_gym/benchmarks/jax_training.py"}

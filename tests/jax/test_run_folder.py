@@ -128,6 +128,37 @@ def test_a_loaded_run_plays_exactly_as_the_trained_one(run: tuple[jt.JaxTraining
     assert result.env_kwargs == PLANT and play_in_numpy_env(result, 2) == played
 
 
+def test_watch_and_record_play_a_jax_run(run: tuple[jt.JaxTraining, Path],
+                                         played: list[list[float]]) -> None:
+    """``fir-gym watch`` / ``record --policy RUN`` (their shared loader,
+    :mod:`fir_gym.episode_policy`): a JAX folder plays its first seed, ``RUN/seed1`` the
+    second, on the env its configuration rebuilds — the same episodes, to the last bit, as
+    ``play_in_numpy_env``."""
+    from fir_gym.episode_policy import run_config, trained_policy
+    from fir_gym.training import make_env
+
+    result, folder = run
+    for where, index in ((folder, 0), (folder / "seed1", 1)):
+        config = run_config(where, None)
+        assert (config.env_id, config.observation_kind, config.seed) == (ORBIT, result.kind,
+                                                                         index)
+        assert config.env_kwargs == PLANT and config.kind_kwargs == KINDS[result.kind]
+        env = make_env(config)
+        act = trained_policy(where, config.algo, env)
+        for episode in range(2):
+            obs, _ = env.reset(seed=10_000 + episode)
+            total, done = 0.0, False
+            while not done:
+                obs, reward, terminated, truncated, _ = env.step(act(obs))
+                total, done = total + float(reward), terminated or truncated
+            assert total == played[index][episode]
+        env.close()
+    with pytest.raises(ValueError, match=r"has seeds \[0, 1\], not 7"):
+        run_config(folder / "seed7", None)
+    with pytest.raises(ValueError, match="was trained on"):
+        run_config(folder, "fir_gym/VanDerPol-v0")
+
+
 def test_a_folder_without_the_keywords_reads_them_as_empty(run: tuple[jt.JaxTraining, Path],
                                                            tmp_path: Path) -> None:
     """Folders saved before ``env_kwargs`` was recorded (and ``kind_kwargs``, and the
