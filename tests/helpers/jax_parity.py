@@ -87,3 +87,35 @@ def replay(ys: np.ndarray, applied: np.ndarray, plant: Any = None,
             return {} if missing is None else {"measurement_missing": bool(missing[self.k])}
 
     return Replay()
+
+
+def normwise(got: np.ndarray, want: np.ndarray) -> float:
+    """``max |got − want| / max |want|`` (a covariance's off-diagonal entries may be exact
+    zeros in one filter and round-off in the other)."""
+    return float(np.max(np.abs(got - want)) / max(float(np.max(np.abs(want))), 1e-300))
+
+
+def compare_with_numpy_filter(run: list[Any], numpy_env: Any,
+                              missing: list[bool] | None = None) -> dict[str, float]:
+    """A JAX filter kind's closed-loop run (``[(state, info)]``, the reset's first) against
+    the numpy ``EstimatorObservation`` replaying it (``numpy_env``, stepped here with the
+    recorded applied actions): the divergence flag asserted equal at every step, the NIS
+    NaN in the JAX record wherever the numpy filter has none (or the reading is
+    ``missing``); returns the worst estimate and covariance differences relative to their
+    largest entry and the worst NIS difference relative to ``1 + NIS``."""
+    applied = [np.asarray(info["action"]) for _, info in run[1:]]
+    estimate, _ = numpy_env.reset()
+    worst = {"x": 0.0, "P": 0.0, "nis": 0.0}
+    for k, (state, _) in enumerate(run):
+        if k:
+            estimate = numpy_env.step(applied[k - 1])[0]
+        est = numpy_env.estimator
+        assert bool(state.diverged) == bool(est.diverged), f"step {k}"
+        worst["x"] = max(worst["x"], normwise(np.asarray(state.filter_x), estimate))
+        worst["P"] = max(worst["P"], normwise(np.asarray(state.filter_P), np.asarray(est.P)))
+        nis, got = float(est.last_info.get("nis", np.nan)), float(state.nis)
+        if np.isnan(nis) or (missing is not None and missing[k]):
+            assert np.isnan(got), f"step {k}: NIS {got} where the numpy filter has none"
+        else:
+            worst["nis"] = max(worst["nis"], abs(got - nis) / (1.0 + abs(nis)))
+    return worst

@@ -21,7 +21,7 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from jax_parity import replay  # noqa: E402
+from jax_parity import compare_with_numpy_filter, replay  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
@@ -52,24 +52,6 @@ def _rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]
         if bool(state.terminated):
             break
     return out
-
-
-class Missing(gym.Wrapper):
-    """Reports the given ``measurement_missing`` flags (reset's first) in ``info``."""
-
-    def __init__(self, env: gym.Env, flags: list[bool]) -> None:
-        super().__init__(env)
-        self.flags, self.k = flags, 0
-
-    def reset(self, **kwargs: Any) -> Any:
-        y, info = self.env.reset(**kwargs)
-        self.k = 0
-        return y, {**info, "measurement_missing": self.flags[0]}
-
-    def step(self, action: Any) -> Any:
-        y, r, te, tr, info = self.env.step(action)
-        self.k += 1
-        return y, r, te, tr, {**info, "measurement_missing": self.flags[self.k]}
 
 
 def _episode(env_id: str, kind: str, options: dict[str, Any] | None = None) -> Any:
@@ -133,26 +115,10 @@ def test_the_filter_predicts_through_a_lost_reading(env_id: str, kind: str) -> N
     ys = np.array([np.asarray(s.y) for s, _ in run])
     applied = np.array([np.asarray(i["action"]) for _, i in run[1:]])
     with_plant = gym.make(env_id, **plan.env_kwargs)
-    numpy_env = EstimatorObservation(Missing(replay(ys, applied, with_plant.unwrapped), flags),
-                                     kind, **options)
+    numpy_env = EstimatorObservation(replay(ys, applied, with_plant.unwrapped, flags), kind,
+                                     **options)
     with_plant.close()
-    estimate, _ = numpy_env.reset()
-    worst = {"x": 0.0, "P": 0.0, "nis": 0.0}
-    for k, (state, _) in enumerate(run):
-        if k:
-            estimate = numpy_env.step(applied[k - 1])[0]
-        est = numpy_env.estimator
-        assert bool(state.diverged) == bool(est.diverged), f"step {k}"
-        x_ref, P_ref = estimate, np.asarray(est.P)
-        worst["x"] = max(worst["x"], float(np.max(np.abs(np.asarray(state.filter_x) - x_ref))
-                                           / max(np.max(np.abs(x_ref)), 1e-300)))
-        worst["P"] = max(worst["P"], float(np.max(np.abs(np.asarray(state.filter_P) - P_ref))
-                                           / max(np.max(np.abs(P_ref)), 1e-300)))
-        nis, got = float(est.last_info.get("nis", np.nan)), float(state.nis)
-        if flags[k] or np.isnan(nis):
-            assert np.isnan(got), f"step {k}: NIS {got} where the numpy filter has none"
-        else:
-            worst["nis"] = max(worst["nis"], abs(got - nis) / (1.0 + abs(nis)))
+    worst = compare_with_numpy_filter(run, numpy_env, flags)
     print(env_id, kind, f"{sum(flags)} of {len(flags)} readings lost", worst)
     assert flags[0] and sum(flags) > 1
     assert max(worst.values()) < RTOL, worst

@@ -30,7 +30,7 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from jax_parity import replay  # noqa: E402
+from jax_parity import compare_with_numpy_filter, replay  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
@@ -44,12 +44,6 @@ STEPS = 150
 TEST_OPTIONS = {"ukf": {"alpha": 1.0, "kappa": 1.0}}
 CASES = [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
          if kind in GENERIC_FILTERS]
-
-
-def normwise(got: np.ndarray, want: np.ndarray) -> float:
-    """``max |got − want| / max |want|`` (a covariance's off-diagonal entries may be exact
-    zeros in one filter and round-off in the other)."""
-    return float(np.max(np.abs(got - want)) / max(float(np.max(np.abs(want))), 1e-300))
 
 
 def _jax_rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
@@ -80,20 +74,6 @@ def test_the_kind_is_the_numpy_envs_filter(env_id: str, kind: str) -> None:
     with_plant = gym.make(env_id, **plan.env_kwargs)
     numpy_env = EstimatorObservation(replay(ys, applied, with_plant.unwrapped), kind, **options)
     with_plant.close()
-    estimate, _ = numpy_env.reset()
-    worst = {"x": 0.0, "P": 0.0, "nis": 0.0}
-    for k, (state, _) in enumerate(run):
-        if k:
-            estimate = numpy_env.step(applied[k - 1])[0]
-        est = numpy_env.estimator
-        assert bool(state.diverged) == bool(est.diverged), f"step {k}"
-        worst["x"] = max(worst["x"], normwise(np.asarray(state.filter_x), estimate))
-        worst["P"] = max(worst["P"], normwise(np.asarray(state.filter_P), est.P))
-        nis = float(est.last_info.get("nis", np.nan))
-        got = float(state.nis)
-        if np.isnan(nis):
-            assert np.isnan(got), f"step {k}"
-        else:
-            worst["nis"] = max(worst["nis"], abs(got - nis) / (1.0 + abs(nis)))
+    worst = compare_with_numpy_filter(run, numpy_env)
     print(env_id, kind, worst)
     assert max(worst.values()) < RTOL, worst

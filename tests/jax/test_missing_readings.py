@@ -42,7 +42,7 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from jax_parity import replay  # noqa: E402
+from jax_parity import normwise, replay  # noqa: E402
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.estimators import compiled  # noqa: E402
@@ -75,11 +75,6 @@ def missing_pattern(steps: int, horizon: int) -> np.ndarray:
     missing[[4 * horizon + 1, 4 * horizon + 3]] = True     # isolated again
     assert 5 < horizon - 1 and 4 * horizon + 3 < steps // 3
     return missing
-
-
-def normwise(got: np.ndarray, want: np.ndarray) -> float:
-    """``max |got − want| / max |want|``."""
-    return float(np.max(np.abs(got - want)) / max(float(np.max(np.abs(want))), 1e-300))
 
 
 def plant_data(env_id: str, kind: str, seed: int = 23
