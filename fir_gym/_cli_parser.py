@@ -121,7 +121,9 @@ def _add_training_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tensorboard", default=None, metavar="DIR",
                    help="write TensorBoard logs to DIR (needs tensorboard; default: none)")
     p.add_argument("--resume", action="store_true",
-                   help="continue from the latest checkpoint; skip finished runs")
+                   help="continue from the latest checkpoint; skip finished runs (--backend "
+                        "jax: skip OUT's finished run of the same call and code; a JAX run is "
+                        "written only when it has finished)")
     p.add_argument("--out", required=True, help="output folder (required)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 

@@ -202,7 +202,7 @@ def train_jax(args: argparse.Namespace) -> int:
 
     jax_train.check_supported(args.env, args.estimator, args.observation)
     refused = {"--algo sac": args.algo != "ppo",
-               "--checkpoint-freq": bool(args.checkpoint_freq), "--resume": args.resume,
+               "--checkpoint-freq": bool(args.checkpoint_freq),
                "--tensorboard": bool(args.tensorboard)}
     if any(refused.values()):
         raise ValueError("the jax backend trains PPO and takes no "
@@ -212,12 +212,17 @@ def train_jax(args: argparse.Namespace) -> int:
                            algo_kwargs=args.algo_kwargs, hyperparams=args.hyperparams)
     checkpoints = max(1, rec.steps // args.eval_freq) if args.eval_freq else 10
     seeds = list(range(args.seed, args.seed + args.seeds))
+    call = {"steps": args.steps, "n_envs": args.n_envs, "algo_kwargs": args.algo_kwargs,
+            "env_kwargs": args.env_kwargs, "hyperparams": args.hyperparams,
+            "kind_kwargs": options, "checkpoints": checkpoints, "episodes": args.episodes}
+    if args.resume:            # a finished run of this call and code: nothing to train
+        done = jax_train.finished_run(args.out, args.env, args.estimator, seeds, **call)
+        if done is not None:
+            print(f"{jax_returns_line(args.env, args.estimator, done.final_returns)}; "
+                  f"reused the finished run in {args.out} (--resume)")
+            return 0
     with working(f"training {len(seeds)} seed(s) with jax", enabled=not args.no_progress):
-        result = jax_train.train(args.env, args.estimator, seeds, steps=args.steps,
-                                 n_envs=args.n_envs, algo_kwargs=args.algo_kwargs,
-                                 env_kwargs=args.env_kwargs, hyperparams=args.hyperparams,
-                                 kind_kwargs=options, checkpoints=checkpoints,
-                                 episodes=args.episodes)
+        result = jax_train.train(args.env, args.estimator, seeds, **call)
     out = jax_train.save(result, args.out)
     print(f"{jax_returns_line(args.env, args.estimator, result.final_returns)}; saved in {out}")
     print(f"jax: compile {result.compile_seconds:.1f} s (cache {result.cache}), train "

@@ -551,6 +551,9 @@ class JaxTraining:
     train_state: Any = field(default=None, repr=False)   # the vmapped rejax state
     kind_kwargs: dict[str, Any] = field(default_factory=dict)   # the kind's options
     env_kwargs: dict[str, Any] = field(default_factory=dict)    # the plant's keywords
+    #: the evaluation settings of the call (``checkpoints``, ``curve_episodes``,
+    #: ``episodes``, ``eval_seed``): with the fields above, everything :func:`train` was given
+    settings: dict[str, Any] = field(default_factory=dict)
 
     @property
     def per_seed(self) -> list[float]:
@@ -620,7 +623,9 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
         curves=np.asarray(curve).mean(axis=-1).tolist(),
         final_returns=np.asarray(final).tolist(),
         compile_seconds=compiled_at - start, train_seconds=done - compiled_at, cache=folder,
-        train_state=ts, kind_kwargs=dict(kind_kwargs or {}), env_kwargs=dict(env_kwargs or {}))
+        train_state=ts, kind_kwargs=dict(kind_kwargs or {}), env_kwargs=dict(env_kwargs or {}),
+        settings={"checkpoints": checkpoints, "curve_episodes": curve_episodes,
+                  "episodes": episodes, "eval_seed": eval_seed})
 
 
 def save(result: JaxTraining, out: str | Path) -> Path:
@@ -648,6 +653,55 @@ def save(result: JaxTraining, out: str | Path) -> Path:
             (out / f"seed{seed}").mkdir(exist_ok=True)
             (out / f"seed{seed}" / "policy.msgpack").write_bytes(serialization.to_bytes(one))
     return out
+
+
+def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
+                 steps: int | None = None, n_envs: int | None = None,
+                 algo_kwargs: dict[str, Any] | None = None,
+                 env_kwargs: dict[str, Any] | None = None, hyperparams: str | None = None,
+                 kind_kwargs: dict[str, Any] | None = None, checkpoints: int = 10,
+                 curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000
+                 ) -> JaxTraining | None:
+    """The run in ``out`` (:func:`load`) if it is the one :func:`train` with these arguments
+    would make — the same plant, kind, seeds, recipe, keywords and evaluation settings, and
+    the same :func:`~fir_gym.code_version.code_version` — else ``None`` (nothing there, or
+    the same run at other code: train it again). ``fir-gym train --backend jax --resume``
+    skips a finished run this way; a JAX run writes its folder only when it has finished, so
+    there is never a part of one to continue.
+
+    Raises:
+        ValueError: ``out`` holds another run (another configuration, or another backend's):
+            naming what differs, so that nothing is overwritten by mistake.
+    """
+    from fir_gym.code_version import code_version
+
+    folder = Path(out)
+    if not (folder / "results.json").is_file():
+        if (folder / "run.json").is_file():
+            raise ValueError(f"--out {folder} holds a stable-baselines3 run: give another "
+                             "folder")
+        return None
+    saved = json.loads((folder / "results.json").read_text())
+    rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
+                 hyperparams=hyperparams)
+    wanted = {"env_id": env_id, "kind": kind, "seeds": [int(s) for s in seeds],
+              "recipe": asdict(rec), "env_kwargs": dict(env_kwargs or {}),
+              "kind_kwargs": dict(kind_kwargs or {}),
+              "settings": {"checkpoints": checkpoints, "curve_episodes": curve_episodes,
+                           "episodes": episodes, "eval_seed": eval_seed}}
+    as_saved = json.loads(json.dumps(wanted))
+    if "settings" not in saved:                 # written before the settings were recorded
+        as_saved.pop("settings")
+    differ = [k for k, v in as_saved.items() if saved.get(k) != v]
+    if differ:
+        raise ValueError(f"--out {folder} holds another run (its {', '.join(differ)} differ "
+                         "from this one's): give another folder, or leave out --resume to "
+                         "train and overwrite it")
+    version = folder / "code_version.txt"
+    if ("settings" not in saved or not version.is_file()
+            or version.read_text().strip() != code_version()):
+        return None
+    return load(folder)
 
 
 def _identity(env_id: str, kind: str, seed: int, rec: Recipe, env_kwargs: dict[str, Any],
@@ -774,4 +828,5 @@ def load(run_dir: str | Path) -> JaxTraining:
         curves=list(data.get("curves", [])), final_returns=list(data.get("final_returns", [])),
         compile_seconds=float(data.get("compile_seconds", math.nan)),
         train_seconds=float(data.get("train_seconds", math.nan)), cache=data.get("cache"),
-        train_state=state, kind_kwargs=kind_kwargs, env_kwargs=env_kwargs)
+        train_state=state, kind_kwargs=kind_kwargs, env_kwargs=env_kwargs,
+        settings=dict(data.get("settings") or {}))

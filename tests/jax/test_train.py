@@ -200,6 +200,21 @@ def test_the_cli_trains_and_writes_the_run_folder(tmp_path: Path, cache: Path,
                                                "seed1"}
     assert main(["evaluate", "--model", str(out), "--episodes", "2", "--no-progress"]) == 0
     assert "over 2 episodes x 2 seed(s)" in capsys.readouterr().out   # the folder plays
+    # --resume: the same call and code reuse the finished run (nothing trained, nothing
+    # written); another call on the folder is refused in one line, the folder untouched
+    before = (out / "results.json").read_text()
+    args = ["train", "--backend", "jax", "--env", ORBIT, "--kind", "measurement", "--steps",
+            "8192", "--seeds", "2", "--episodes", "2", "--eval-freq", "4096", "--no-progress",
+            "--resume", "--out", str(out)]
+    assert main(args) == 0
+    assert "reused the finished run" in capsys.readouterr().out
+    assert (out / "results.json").read_text() == before
+    assert main([*args[:-3], "--seeds", "3", "--resume", "--out", str(out)]) == 2
+    assert "holds another run (its seeds differ" in capsys.readouterr().err
+    assert (out / "results.json").read_text() == before
+    (out / "code_version.txt").write_text("older code\n")    # the same run at other code
+    assert jt.finished_run(out, ORBIT, "measurement", [0, 1], steps=8192, episodes=2,
+                           checkpoints=2) is None
 
 
 def test_the_cache_folder_is_overridable(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
