@@ -186,11 +186,18 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return {name: jnp.asarray(getattr(params, "nominal_" + name), dtype=jnp.float64)
                 for name in self.randomizable}
 
+    def true_fields(self, params: Any, values: dict[str, Any]) -> dict[str, Any]:
+        """The params fields of a truth whose :attr:`randomizable` parameters are ``values``:
+        those values, and whatever the truth derives from them, rebuilt (the numpy plant's
+        ``_apply_params``); the model's (``nominal_*``) are not among them. Traceable:
+        ``values`` may be traced. Computed once per episode
+        (:class:`fir_gym.jax.randomized.Randomized` keeps them in its state)."""
+        return dict(values)
+
     def with_true_values(self, params: Any, values: dict[str, Any]) -> Any:
-        """``params`` with the truth's :attr:`randomizable` parameters set to ``values`` and
-        whatever the truth derives from them rebuilt; the model's (``nominal_*``) untouched
-        (the numpy plant's ``_apply_params``). Traceable: ``values`` may be traced."""
-        return params.replace(**values)
+        """``params`` with the truth's :attr:`randomizable` parameters set to ``values``
+        (:meth:`true_fields`)."""
+        return params.replace(**self.true_fields(params, values))
 
     @property
     def num_actions(self) -> int:

@@ -135,7 +135,7 @@ class CarrierMotionParams(gymnax_env.EnvParams):
     and ``measurement_std`` (``√(V/T)``) are the truth's, ``sigma1`` the reward's normaliser,
     ``nominal_*`` the KF's model (``Q_d`` as ``G Q Gᵀ``, ``R`` as a 1x1 matrix). ``a21``,
     ``a22``, ``delta22``, ``sample_period``, ``q`` and ``noise_input`` are the truth's
-    continuous parameters, from which :meth:`CarrierMotion.with_true_values` samples ``A_d``
+    continuous parameters, from which :meth:`CarrierMotion.true_fields` samples ``A_d``
     and ``process_sqrt`` again when the ``mismatch`` condition draws ``a21`` and ``a22``
     around the model's ``nominal_a21``, ``nominal_a22``.
     """
@@ -381,16 +381,15 @@ class CarrierMotion(FilteredPlant):
         return {"a21": jnp.asarray(params.nominal_a21, dtype=jnp.float64),
                 "a22": jnp.asarray(params.nominal_a22, dtype=jnp.float64)}
 
-    def with_true_values(self, params: CarrierMotionParams, values: dict[str, Any]
-                         ) -> CarrierMotionParams:
-        """The truth sampled again with ``a21``/``a22`` from ``values`` (the numpy plant's
-        ``_apply_params``): ``A_d = e^{A T}`` and ``Q_d`` by Van Loan's method
+    def true_fields(self, params: CarrierMotionParams, values: dict[str, Any]
+                    ) -> dict[str, Any]:
+        """``a21``/``a22`` from ``values`` and the truth sampled again with them (the numpy
+        plant's ``_apply_params``): ``A_d = e^{A T}`` and ``Q_d`` by Van Loan's method
         (:func:`sampled_truth`), its square root by :func:`~fir_gym.jax._plant.psd_sqrt`."""
         from ._plant import psd_sqrt
 
-        params = params.replace(**values)
-        A_d, Q_d = sampled_truth(params)
-        return params.replace(A_d=A_d, process_sqrt=psd_sqrt(Q_d))
+        A_d, Q_d = sampled_truth(params.replace(**values))
+        return {**values, "A_d": A_d, "process_sqrt": psd_sqrt(Q_d)}
 
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams

@@ -19,10 +19,11 @@ from numpy's for the same seed (JAX's generator is not numpy's), the law and the
 not. :meth:`Randomized.values_of` turns given ``ξ`` into the parameters, so a test can replay
 the numpy plant's own draws.
 
-The drawn values ride in the state (:class:`RandomizedState`), the episode's params are
-rebuilt from them at every step by the plant's :meth:`~fir_gym.jax._plant.FilteredPlant.
-with_true_values` (CarrierMotion-v0 samples its continuous model again), and ``info
-["true_params"]`` reports them at every step, as the numpy plant's ``info`` does.
+The drawn values and the params fields of the truth they make — the plant's
+:meth:`~fir_gym.jax._plant.FilteredPlant.true_fields`, computed once per episode at the reset
+(CarrierMotion-v0 samples its continuous model again there, not at every step) — ride in the
+state (:class:`RandomizedState`); every step runs on the params given with those fields in
+place, and ``info["true_params"]`` reports the values, as the numpy plant's ``info`` does.
 """
 
 from __future__ import annotations
@@ -40,11 +41,13 @@ from fir_gym.envs._conditions import CONDITION_STREAM, check_randomize
 
 @struct.dataclass
 class RandomizedState(gymnax_env.EnvState):
-    """The wrapped plant's state (``plant``) and the episode's drawn true parameters
-    (``true_params``, by name); ``time`` mirrors the plant's (gymnax's truncation reads it)."""
+    """The wrapped plant's state (``plant``), the episode's drawn true parameters
+    (``true_params``, by name) and the params fields of that truth (``truth``: the plant's
+    ``true_fields``); ``time`` mirrors the plant's (gymnax's truncation reads it)."""
 
     plant: Any
     true_params: Any
+    truth: Any
 
 
 class Randomized(gymnax_env.Environment[Any, Any]):
@@ -102,14 +105,17 @@ class Randomized(gymnax_env.Environment[Any, Any]):
         return self.values_of(xi, params)
 
     def episode_params(self, state: RandomizedState, params: Any) -> Any:
-        """``params`` with the episode's drawn truth (the plant's ``with_true_values``)."""
-        return self.env.with_true_values(params, state.true_params)
+        """``params`` with the episode's drawn truth in place (its fields, kept in the
+        state since the reset)."""
+        return params.replace(**state.truth)
 
     # ------------------------------------------------------------------ the env
     def reset_env(self, key: jax.Array, params: Any) -> tuple[Any, RandomizedState]:
         values = self.draw(key, params)
-        obs, plant = self.env.reset_env(key, self.env.with_true_values(params, values))
-        return obs, RandomizedState(time=plant.time, plant=plant, true_params=values)
+        truth = self.env.true_fields(params, values)
+        obs, plant = self.env.reset_env(key, params.replace(**truth))
+        return obs, RandomizedState(time=plant.time, plant=plant, true_params=values,
+                                    truth=truth)
 
     def step_env(self, key: jax.Array, state: RandomizedState, action: Any, params: Any
                  ) -> tuple[Any, RandomizedState, jax.Array, jax.Array, dict[str, Any]]:
