@@ -153,7 +153,7 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
     from .policy import JaxPolicy
 
     plant = dict(result.env_kwargs)
-    policies = [JaxPolicy(result, i) for i in range(len(result.seeds))]
+    policies = JaxPolicy.every_seed(result)
     kind, options = result.kind, dict(result.kind_kwargs)
     env = (make_single_env(result.env_id, observation="true", **plant) if kind == "true"
            else make_single_env(result.env_id, **plant) if kind == "measurement"

@@ -24,12 +24,12 @@ class JaxPolicy:
     ``policy(obs)`` acts on one observation or a batch (``(n, n_obs)``), returning float32
     actions of the same leading shape; ``policy(obs, episode_start, state)`` is the
     robustness benchmark's policy signature (:data:`fir_gym.robustness.closed_loop.Policy`:
-    a feed-forward policy carries no state).
+    a feed-forward policy carries no state). :meth:`every_seed` gives one per seed sharing
+    one network and one compiled act (``acting``: what an earlier policy of the same result
+    built).
     """
 
-    def __init__(self, result: Any, index: int) -> None:
-        from .train import make_algorithm, make_env
-
+    def __init__(self, result: Any, index: int, acting: Any = None) -> None:
         ts = result.train_state
         if ts is None:
             raise ValueError(f"{result.env_id} {result.kind}: the result has no train state (a "
@@ -37,18 +37,17 @@ class JaxPolicy:
         if not 0 <= index < len(result.seeds):
             raise ValueError(f"index must be in [0, {len(result.seeds)}) for the run's seeds "
                              f"{result.seeds}; got {index!r}")
-        env, params = make_env(result.env_id, result.kind, dict(result.env_kwargs),
-                               result.kind_kwargs)
-        algo = make_algorithm(env, params, result.recipe)
         self.seed = result.seeds[index]
         self.actor = jax.tree.map(lambda x: x[index], ts.actor_ts.params)
         self.rms = jax.tree.map(lambda x: x[index], ts.obs_rms_state)
+        self._act = _acting(result) if acting is None else acting
 
-        def act(actor: Any, rms: Any, obs: Any) -> Any:
-            seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
-            return algo.actor.apply(actor, seen, method="mean_action")
-
-        self._act = jax.jit(act)
+    @classmethod
+    def every_seed(cls, result: Any) -> list[JaxPolicy]:
+        """One policy per seed of ``result``, in its order, the network built and the act
+        compiled once."""
+        first = cls(result, 0)
+        return [first] + [cls(result, i, first._act) for i in range(1, len(result.seeds))]
 
     def actions(self, obs: Any) -> np.ndarray:
         """The deterministic actions for ``obs`` (one observation, or a batch)."""
@@ -60,3 +59,19 @@ class JaxPolicy:
     def __call__(self, obs: Any, episode_start: Any = None, state: Any = None
                  ) -> tuple[np.ndarray, Any]:
         return self.actions(obs), None
+
+
+def _acting(result: Any) -> Any:
+    """The jitted ``(actor params, obs statistics, observations) -> actions`` of
+    ``result``'s network (its env and algorithm rebuilt from the run's keywords)."""
+    from .train import make_algorithm, make_env
+
+    env, params = make_env(result.env_id, result.kind, dict(result.env_kwargs),
+                           result.kind_kwargs)
+    algo = make_algorithm(env, params, result.recipe)
+
+    def act(actor: Any, rms: Any, obs: Any) -> Any:
+        seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
+        return algo.actor.apply(actor, seen, method="mean_action")
+
+    return jax.jit(act)

@@ -67,10 +67,6 @@ def group_folder(group: Sequence[LearnedTask]) -> Path:
     return Path(first.run_dir).parent / f"{first.regime}-{first.kind}-jax"
 
 
-def _key(task: LearnedTask) -> dict[str, Any]:
-    return {**task_key(task, training_config(task)), "backend": "jax"}
-
-
 def run_group(group: Sequence[LearnedTask]) -> list[dict[str, Any]]:
     """Train the group's seeds in one program (or reuse every seed's cached records), then
     evaluate each seed: one result per task, as
@@ -79,25 +75,27 @@ def run_group(group: Sequence[LearnedTask]) -> list[dict[str, Any]]:
     from .policy import JaxPolicy
     from .train import save, train
 
+    configs = [training_config(task) for task in group]       # each builds the plant once
+    keys = [{**task_key(task, config), "backend": "jax"}
+            for task, config in zip(group, configs, strict=True)]
     cached = []
-    for task in group:
+    for task, key in zip(group, keys, strict=True):
         cache = Path(task.run_dir) / "robustness.json"
         saved = json.loads(cache.read_text()) if cache.is_file() else None
-        cached.append(saved if saved and saved.get("key") == _key(task) else None)
+        cached.append(saved if saved and saved.get("key") == key else None)
     if all(c is not None for c in cached):
         return [{**c, "reused": True} for c in cached if c is not None]
-    first = group[0]
-    config = training_config(first)
+    first, config = group[0], configs[0]
     start = time.perf_counter()
     result = train(first.env_id, first.kind, [t.seed for t in group], steps=first.steps,
                    env_kwargs=dict(config.env_kwargs), kind_kwargs=dict(config.kind_kwargs))
     save(result, group_folder(group))
     trained = (time.perf_counter() - start) / len(group)
     out = []
-    for i, task in enumerate(group):
-        records, evaluated = evaluate_controller(task, training_config(task),
-                                                 JaxPolicy(result, i))
-        one = {"key": _key(task), "train_seconds": trained, "eval_seconds": evaluated,
+    policies = JaxPolicy.every_seed(result)
+    for task, config, key, policy in zip(group, configs, keys, policies, strict=True):
+        records, evaluated = evaluate_controller(task, config, policy)
+        one = {"key": key, "train_seconds": trained, "eval_seconds": evaluated,
                "backend": "jax", "records": records}
         folder = Path(task.run_dir)
         folder.mkdir(parents=True, exist_ok=True)
