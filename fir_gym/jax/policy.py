@@ -46,8 +46,8 @@ class JaxPolicy:
     def every_seed(cls, result: Any) -> list[JaxPolicy]:
         """One policy per seed of ``result``, in its order, the network built and the act
         compiled once."""
-        first = cls(result, 0)
-        return [first] + [cls(result, i, first._act) for i in range(1, len(result.seeds))]
+        acting = _acting(result)
+        return [cls(result, i, acting) for i in range(len(result.seeds))]
 
     def actions(self, obs: Any) -> np.ndarray:
         """The deterministic actions for ``obs`` (one observation, or a batch)."""
