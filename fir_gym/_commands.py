@@ -209,7 +209,8 @@ def train_jax(args: argparse.Namespace) -> int:
                          + ", ".join(k for k, v in refused.items() if v))
     options = kind_options(args.kind_kwargs, [args.estimator])[args.estimator]
     rec = jax_train.recipe(args.env, steps=args.steps, n_envs=args.n_envs,
-                           algo_kwargs=args.algo_kwargs, hyperparams=args.hyperparams)
+                           algo_kwargs=args.algo_kwargs, hyperparams=args.hyperparams,
+                           kind=args.estimator)
     checkpoints = max(1, rec.steps // args.eval_freq) if args.eval_freq else 10
     seeds = list(range(args.seed, args.seed + args.seeds))
     call = {"steps": args.steps, "n_envs": args.n_envs, "algo_kwargs": args.algo_kwargs,

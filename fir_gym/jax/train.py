@@ -78,10 +78,13 @@ from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
 from rejax.algos.ppo import Trajectory  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
-from .registry import PLANTS, kinds_line, make  # noqa: E402  (after fir_gym.jax: x64 on)
+from .registry import PLANTS, make  # noqa: E402  (after fir_gym.jax: x64 on)
 
 #: the env ids and kinds the JAX backend trains
-SUPPORTED: dict[str, tuple[str, ...]] = {env_id: p.kinds for env_id, p in PLANTS.items()}
+#: (every plant's env kinds, and ``recurrent``: the ``measurement`` env with an LSTM policy,
+#: :mod:`fir_gym.jax.recurrent_ppo`)
+SUPPORTED: dict[str, tuple[str, ...]] = {env_id: (*p.kinds, "recurrent")
+                                         for env_id, p in PLANTS.items()}
 #: the parts of the recipe not matched (the module docstring says why)
 UNMATCHED = (
     "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
@@ -101,13 +104,18 @@ SB3_DEFAULTS = {"vf_coef": 0.5, "max_grad_norm": 0.5, "net_arch": (64, 64),
 #: VecNormalize's defaults
 VECNORMALIZE_DEFAULTS = {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0,
                          "clip_reward": 10.0, "gamma": 0.99, "epsilon": 1e-8}
+#: sb3-contrib's RecurrentActorCriticPolicy defaults the recurrent policy matches (the LSTM's
+#: size may be set; the rest is the arrangement :mod:`fir_gym.jax.recurrent_ppo` builds)
+LSTM_DEFAULTS = {"lstm_hidden_size": 256, "n_lstm_layers": 1, "shared_lstm": False,
+                 "enable_critic_lstm": True}
 ADAM_EPS = 1e-5
 CACHE_ENV = "FIR_GYM_JAX_CACHE"
 
 
 def supported_line() -> str:
-    """One line naming what the JAX backend trains (:func:`fir_gym.jax.registry.kinds_line`)."""
-    return kinds_line()
+    """One line naming what the JAX backend trains: each plant and its kinds."""
+    return "; ".join(f"{env_id} with kind {', '.join(kinds)}"
+                     for env_id, kinds in SUPPORTED.items())
 
 
 def check_supported(env_id: str, kind: str, observation: str = "estimate") -> None:
@@ -145,6 +153,9 @@ class Recipe:
     normalize_rewards: bool
     clip_obs: float
     clip_reward: float
+    #: the LSTM's units of the ``recurrent`` kind's policy (sb3-contrib's
+    #: ``lstm_hidden_size``); 0 for the feed-forward policy of every other kind
+    lstm_hidden_size: int = 0
 
     @property
     def rollout(self) -> int:
@@ -158,19 +169,23 @@ class Recipe:
 
 def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
            n_envs: int | None = None, algo_kwargs: dict[str, Any] | None = None,
-           hyperparams: str | None = None) -> Recipe:
+           hyperparams: str | None = None, kind: str = "true") -> Recipe:
     """The shipped (or ``hyperparams``) PPO recipe of ``env_id`` in rejax's terms.
 
     Read through :meth:`fir_gym.training.RunConfig.settings`, so the overrides and the
-    clamps (a rollout no longer than the budget) are the SB3 backend's. Refuses settings it
-    cannot translate: an algorithm keyword it does not know, different actor and critic
-    layers, value clipping, advantages not normalised, a minibatch size that does not
-    divide the rollout.
+    clamps (a rollout no longer than the budget) are the SB3 backend's; ``kind``
+    ``"recurrent"`` reads RecurrentPPO's recipe (``ppo_lstm.yml``), every other kind PPO's.
+    Refuses settings it cannot translate: an algorithm keyword it does not know, different
+    actor and critic layers, value clipping, advantages not normalised, a minibatch size that
+    does not divide the rollout; for ``recurrent`` an LSTM other than sb3-contrib's default
+    arrangement (one layer, the critic's own), and minibatches that are not whole envs'
+    sequences (``num_envs`` divisible by the number of minibatches).
     """
     from fir_gym.training.run import RunConfig
 
-    settings = RunConfig(env_id, "true", algo="ppo", steps=steps, n_envs=n_envs,
-                         algo_kwargs=dict(algo_kwargs or {}),
+    recurrent = kind == "recurrent"
+    settings = RunConfig(env_id, "recurrent" if recurrent else "true", algo="ppo",
+                         steps=steps, n_envs=n_envs, algo_kwargs=dict(algo_kwargs or {}),
                          hyperparams=hyperparams).settings()
     algo = dict(settings["algo_kwargs"])
     unknown = sorted(set(algo) - set(KNOWN_ALGO_KWARGS))
@@ -181,10 +196,17 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
         raise ValueError("the jax backend trains with clip_range_vf=None and normalised "
                          "advantages (stable-baselines3's defaults)")
     policy = dict(algo.get("policy_kwargs") or {})
-    for key in sorted(set(policy) - {"log_std_init", "net_arch", "activation_fn", "ortho_init"}):
+    known = {"log_std_init", "net_arch", "activation_fn", "ortho_init"}
+    if recurrent:
+        known |= set(LSTM_DEFAULTS)
+    for key in sorted(set(policy) - known):
         raise ValueError(f"the jax backend does not translate policy_kwargs {key!r}")
     if policy.get("ortho_init", True) is not True:
         raise ValueError("the jax backend initialises as SB3's ortho_init=True only")
+    for key, value in LSTM_DEFAULTS.items():
+        if key != "lstm_hidden_size" and policy.get(key, value) != value:
+            raise ValueError(f"the jax backend's recurrent policy has policy_kwargs {key}="
+                             f"{value!r} only; got {policy[key]!r}")
     arch = policy.get("net_arch", SB3_DEFAULTS["net_arch"])
     if isinstance(arch, dict):
         if list(arch.get("pi", [])) != list(arch.get("vf", [])):
@@ -199,11 +221,16 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
     if (n_envs_ * n_steps) % batch:
         raise ValueError(f"the jax backend needs batch_size ({batch}) to divide the rollout "
                          f"n_steps x n_envs ({n_steps} x {n_envs_})")
+    minibatches = n_envs_ * n_steps // batch
+    if recurrent and n_envs_ % minibatches:
+        raise ValueError(f"the jax backend's recurrent PPO takes whole envs' sequences as "
+                         f"minibatches: n_envs ({n_envs_}) must be divisible by the number of "
+                         f"minibatches (n_steps x n_envs / batch_size = {minibatches})")
     norm = settings["normalize"]
     norm = None if norm is None else {**VECNORMALIZE_DEFAULTS, **norm}
     return Recipe(
         steps=int(settings["steps"]), num_envs=n_envs_, num_steps=n_steps,
-        num_minibatches=n_envs_ * n_steps // batch, num_epochs=int(algo.get("n_epochs", 10)),
+        num_minibatches=minibatches, num_epochs=int(algo.get("n_epochs", 10)),
         learning_rate=float(algo.get("learning_rate", 3e-4)),
         gamma=float(algo.get("gamma", 0.99)), gae_lambda=float(algo.get("gae_lambda", 0.95)),
         clip_eps=float(algo.get("clip_range", 0.2)), ent_coef=float(algo.get("ent_coef", 0.0)),
@@ -214,7 +241,9 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
         normalize_observations=bool(norm and norm["norm_obs"]),
         normalize_rewards=bool(norm and norm["norm_reward"]),
         clip_obs=float(norm["clip_obs"]) if norm else math.inf,
-        clip_reward=float(norm["clip_reward"]) if norm else math.inf)
+        clip_reward=float(norm["clip_reward"]) if norm else math.inf,
+        lstm_hidden_size=int(policy.get("lstm_hidden_size", LSTM_DEFAULTS["lstm_hidden_size"]))
+        if recurrent else 0)
 
 
 # ---------------------------------------------------------------------------- rejax, adapted
@@ -359,8 +388,11 @@ class SB3LikePPO(PPO):
         if self.normalize_observations:
             final = self.normalize_obs(obs_rms_state, final)
         by_time_limit = info["truncated"] & ~info["terminated"]
-        value = self.critic.apply(ts.critic_ts.params, final)
-        return jnp.where(by_time_limit, self.gamma * value, 0.0)
+        return jnp.where(by_time_limit, self.gamma * self.final_value(ts, final), 0.0)
+
+    def final_value(self, ts: Any, final: Any) -> Any:
+        """The critic's value of the (normalised) terminal observations ``final``."""
+        return self.critic.apply(ts.critic_ts.params, final)
 
     def collect_trajectories(self, ts: Any) -> Any:
         """rejax's ``PPO.collect_trajectories`` with stable-baselines3's bootstrap of episodes
@@ -400,6 +432,17 @@ class SB3LikePPO(PPO):
 
         return jax.lax.scan(env_step, ts, None, self.num_steps)
 
+    def update_actor(self, ts: Any, batch: Any) -> Any:
+        def loss(params: Any) -> Any:
+            log_prob, entropy = self.actor.apply(params, batch.trajectories.obs,
+                                                 batch.trajectories.action,
+                                                 method="log_prob_entropy")
+            return actor_loss(self, log_prob, entropy, batch.trajectories.log_prob,
+                              batch.advantages)
+
+        grads = jax.grad(loss)(ts.actor_ts.params)
+        return ts.replace(actor_ts=ts.actor_ts.apply_gradients(grads=grads))
+
     def update_critic(self, ts: Any, batch: Any) -> Any:
         def loss(params: Any) -> Any:        # SB3: vf_coef * mse, no value clipping
             value = self.critic.apply(params, batch.trajectories.obs)
@@ -408,18 +451,51 @@ class SB3LikePPO(PPO):
         grads = jax.grad(loss)(ts.critic_ts.params)
         return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
 
+    # the deterministic policy, as the evaluations play it (a recurrent one carries a state)
+    def policy_carry(self, batch: int) -> Any:
+        """What the deterministic policy carries from step to step: nothing (feed-forward)."""
+        return None
+
+    def policy_action(self, actor_params: Any, carry: Any, obs: Any, start: Any
+                      ) -> tuple[Any, Any]:
+        """``(carry, actions)``: the Gaussian's mean clipped to the action box for the
+        (normalised) observations ``obs (batch, n)``; ``start`` marks an episode's first step."""
+        return carry, self.actor.apply(actor_params, obs, method="mean_action")
+
+
+def actor_loss(algo: Any, log_prob: Any, entropy: Any, old_log_prob: Any, advantages: Any
+               ) -> Any:
+    """stable-baselines3's PPO policy loss on a minibatch: the clipped surrogate of the
+    advantages normalised with the minibatch's mean and *unbiased* standard deviation
+    (``th.std``; rejax's ``update_actor`` divides by the biased one), minus ``ent_coef`` times
+    the mean entropy."""
+    ratio = jnp.exp(log_prob - old_log_prob)
+    advantages = (advantages - advantages.mean()) / (jnp.std(advantages, ddof=1) + 1e-8)
+    clipped = jnp.clip(ratio, 1 - algo.clip_eps, 1 + algo.clip_eps)
+    surrogate = -jnp.minimum(ratio * advantages, clipped * advantages).mean()
+    return surrogate - algo.ent_coef * entropy.mean()
+
 
 def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None,
              kind_kwargs: dict[str, Any] | None = None) -> tuple[Any, Any]:
     """``(gymnax env, params)`` of a supported plant and kind (``kind_kwargs``: the kind's
-    ``horizon``, :func:`fir_gym.jax.make`)."""
+    ``horizon``, :func:`fir_gym.jax.make`); ``recurrent`` observes the ``measurement``."""
     check_supported(env_id, kind)
-    return make(env_id, kind, kind_kwargs=kind_kwargs, **(env_kwargs or {}))
+    observed = "measurement" if kind == "recurrent" else kind
+    return make(env_id, observed, kind_kwargs=kind_kwargs, **(env_kwargs or {}))
 
 
 def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:
-    """The PPO of ``rec`` on ``env`` (rejax's ``create``, then the SB3-like policy)."""
-    algo = SB3LikePPO.create(
+    """The PPO of ``rec`` on ``env`` (rejax's ``create``, then the SB3-like policy):
+    :class:`SB3LikePPO`, or :class:`fir_gym.jax.recurrent_ppo.RecurrentPPO` where the recipe
+    has an LSTM."""
+    algorithm: Any = SB3LikePPO
+    extra: dict[str, Any] = {}
+    if rec.lstm_hidden_size:
+        from .recurrent_ppo import RecurrentPPO
+
+        algorithm, extra = RecurrentPPO, {"lstm_hidden_size": rec.lstm_hidden_size}
+    algo = algorithm.create(**extra,
         env=Gymnax0(env), env_params=params, num_envs=rec.num_envs, num_steps=rec.num_steps,
         num_minibatches=rec.num_minibatches, num_epochs=rec.num_epochs,
         learning_rate=rec.learning_rate, gamma=rec.gamma, gae_lambda=rec.gae_lambda,
@@ -448,17 +524,19 @@ def evaluate_policy(algo: SB3LikePPO, ts: Any, keys: Any) -> Any:
         obs, state = env.reset(reset_key, params)
 
         def step(carry: Any, step_key: Any) -> Any:
-            obs, state, total, done = carry
+            obs, state, memory, total, done, start = carry
             seen = obs
             if algo.normalize_observations:
                 seen = algo.normalize_obs(ts.obs_rms_state, obs)
-            action = algo.actor.apply(ts.actor_ts.params, seen[None], method="mean_action")[0]
-            obs, state, reward, finished, _ = env.step(step_key, state, action, params)
+            memory, action = algo.policy_action(ts.actor_ts.params, memory, seen[None],
+                                                jnp.asarray([start]))
+            obs, state, reward, finished, _ = env.step(step_key, state, action[0], params)
             total = total + jnp.where(done, 0.0, jnp.squeeze(reward))
-            return (obs, state, total, done | finished), None
+            return (obs, state, memory, total, done | finished, False), None
 
         steps = jax.random.split(key, params.max_steps_in_episode)
-        (_, _, total, _), _ = jax.lax.scan(step, (obs, state, jnp.zeros(()), False), steps)
+        first = (obs, state, algo.policy_carry(1), jnp.zeros(()), False, True)
+        (_, _, _, total, _, _), _ = jax.lax.scan(step, first, steps)
         return total
 
     return jax.vmap(episode)(keys)
@@ -604,7 +682,7 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
     if cache:
         folder = str(enable_compilation_cache(None if cache is True else cache))
     rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
-                 hyperparams=hyperparams)
+                 hyperparams=hyperparams, kind=kind)
     env, params = make_env(env_id, kind, env_kwargs, kind_kwargs)
     algo = make_algorithm(env, params, rec)
     program = jax.jit(jax.vmap(training_program(
@@ -683,7 +761,7 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
         return None
     saved = json.loads((folder / "results.json").read_text())
     rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
-                 hyperparams=hyperparams)
+                 hyperparams=hyperparams, kind=kind)
     wanted = {"env_id": env_id, "kind": kind, "seeds": [int(s) for s in seeds],
               "recipe": asdict(rec), "env_kwargs": dict(env_kwargs or {}),
               "kind_kwargs": dict(kind_kwargs or {}),

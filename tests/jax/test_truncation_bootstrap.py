@@ -26,56 +26,13 @@ pytest.importorskip("yaml")
 
 import jax
 import jax.numpy as jnp
-from flax import struct
-from gymnax.environments import environment, spaces
 from jax_runs import ORBIT
 from rejax import PPO
+from ticker import EPISODE, X0, Ticker, TickerParams
 
 from fir_gym.jax import train as jt
 
-EPISODE = 3          # steps to the time limit
 STEPS = 7            # collected per env: ends after steps 3 and 6
-X0 = 0.5             # the first observation's x
-
-
-@struct.dataclass
-class TickerState(environment.EnvState):
-    x: jax.Array
-
-
-@struct.dataclass
-class TickerParams(environment.EnvParams):
-    max_steps_in_episode: int = EPISODE
-    terminate_at: int = 0            # the episode step that terminates (0: none)
-
-
-class Ticker(environment.Environment):
-    """``x`` starts at 0.5 and climbs by one a step whatever the action; the observation is
-    ``(x, x² / 4)``, the reward ``-x``; terminated at step ``terminate_at`` of an episode."""
-
-    @property
-    def default_params(self) -> TickerParams:
-        return TickerParams()
-
-    def obs(self, x: jax.Array) -> jax.Array:
-        return jnp.stack([x, x * x / 4.0])
-
-    def reset_env(self, key: jax.Array, params: TickerParams) -> Any:
-        x = jnp.asarray(X0)
-        return self.obs(x), TickerState(time=0, x=x)
-
-    def step_env(self, key: jax.Array, state: TickerState, action: Any, params: TickerParams
-                 ) -> Any:
-        x, time = state.x + 1.0, state.time + 1
-        terminated = time == params.terminate_at
-        new = TickerState(time=time, x=x)
-        return self.obs(x), new, -x, terminated, {}
-
-    def observation_space(self, params: TickerParams) -> spaces.Box:
-        return spaces.Box(-jnp.inf, jnp.inf, (2,), jnp.float64)
-
-    def action_space(self, params: Any = None) -> spaces.Box:
-        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
 
 
 def algorithm(terminate_at: int = 0, *, normalize_rewards: bool = True

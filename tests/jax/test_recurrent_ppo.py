@@ -1,0 +1,402 @@
+"""fir_gym.jax.recurrent_ppo: the ``recurrent`` kind's PPO, against sb3-contrib's RecurrentPPO.
+
+Oracles that cannot share its bugs:
+* ``torch.nn.LSTM`` for the cell (:mod:`fir_gym.jax.lstm`), in float64;
+* sb3-contrib's ``RecurrentActorCriticPolicy`` built with the shipped recipe's policy keywords
+  (``ppo_lstm.yml``), in float64, its parameters copied into ours: the same actions,
+  log-probabilities, entropies and values over sequences crossing episode starts, step by step
+  (the rollout, ``predict``) and as whole sequences (``evaluate_actions``, what the update
+  replays), and the same gradients of SB3's PPO loss (torch's autograd through its LSTM);
+* the rollout replayed by that torch policy: each stored value and log-probability, the
+  episode-start flags, and the bootstrap of an episode cut by its time limit;
+* a task only memory solves (:class:`Cue`): the recurrent PPO learns it, the feed-forward PPO
+  on the same observations cannot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("jax")
+pytest.importorskip("gymnax")
+pytest.importorskip("rejax")
+pytest.importorskip("yaml")
+pytest.importorskip("torch")
+pytest.importorskip("sb3_contrib")
+
+import gymnasium as gym
+import jax
+import jax.numpy as jnp
+import torch
+from flax import struct
+from gymnax.environments import environment, spaces
+from jax_runs import ORBIT
+from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
+from sb3_contrib.common.recurrent.type_aliases import RNNStates
+from ticker import Ticker, TickerParams
+
+from fir_gym.jax import lstm
+from fir_gym.jax import train as jt
+from fir_gym.jax.recurrent_ppo import RecurrentPPO
+
+H = 64                       # the shipped recipe's lstm_hidden_size
+
+
+# ---------------------------------------------------------------------------- the torch twin
+def recurrent_algorithm(env: Any, params: Any, **changes: Any
+                        ) -> tuple[RecurrentPPO, jt.Recipe]:
+    """The shipped recurrent recipe (``changes`` applied) on ``env``."""
+    rec = dataclasses.replace(jt.recipe(ORBIT, kind="recurrent"), **changes)
+    algo = jt.make_algorithm(env, params, rec)
+    assert isinstance(algo, RecurrentPPO)
+    return algo, rec
+
+
+def torch_policy(n_obs: int, seed: int = 0) -> Any:
+    """sb3-contrib's policy as the SB3 backend builds it for ``recurrent`` (ppo_lstm.yml's
+    policy keywords), in float64."""
+    torch.manual_seed(seed)
+    policy = RecurrentActorCriticPolicy(
+        gym.spaces.Box(-np.inf, np.inf, (n_obs,), np.float64),
+        gym.spaces.Box(-1.0, 1.0, (1,), np.float32), lambda _: 1e-3,
+        log_std_init=-1.0, lstm_hidden_size=H, enable_critic_lstm=True)
+    # SB3's preprocess_obs casts a Box observation to float32 before the features extractor
+    # (a flatten): the tests' observations are float32 numbers, so the extractor casting
+    # back to float64 leaves the same function, in float64
+    policy.features_extractor.forward = lambda obs: torch.flatten(obs, 1).double()
+    return policy.double()
+
+
+def t(x: Any) -> Any:
+    return torch.tensor(np.array(x, dtype=np.float64))
+
+
+def ours_from_torch(policy: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The torch policy's parameters in our layout: ``(actor params, critic params)``."""
+    p = {k: v.detach().numpy() for k, v in policy.state_dict().items()}
+
+    def cell(prefix: str) -> dict[str, Any]:
+        return {"params": {name: jnp.asarray(p[f"{prefix}.{name}_l0"])
+                           for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh")}}
+
+    def dense(name: str) -> dict[str, Any]:
+        return {"kernel": jnp.asarray(p[f"{name}.weight"].T),
+                "bias": jnp.asarray(p[f"{name}.bias"])}
+
+    actor = {"lstm": cell("lstm_actor"), "head": {"params": {
+        "features": {"Dense_0": dense("mlp_extractor.policy_net.0"),
+                     "Dense_1": dense("mlp_extractor.policy_net.2")},
+        "action_mean": dense("action_net"), "action_log_std": jnp.asarray(p["log_std"])}}}
+    critic = {"lstm": cell("lstm_critic"), "head": {"params": {
+        "Features_0": {"Dense_0": dense("mlp_extractor.value_net.0"),
+                       "Dense_1": dense("mlp_extractor.value_net.2")},
+        "Dense_0": dense("value_net")}}}
+    return actor, critic
+
+
+def torch_states(actor: lstm.Carry, critic: lstm.Carry) -> Any:
+    def one(carry: lstm.Carry) -> tuple[Any, Any]:
+        return t(carry[0])[None].contiguous(), t(carry[1])[None].contiguous()
+
+    return RNNStates(pi=one(actor), vf=one(critic))
+
+
+def sequences(rng: np.random.Generator, steps: int, batch: int, n_obs: int
+              ) -> tuple[np.ndarray, np.ndarray, lstm.Carry, lstm.Carry]:
+    """Observations ``(T, B, n)``, episode starts ``(T, B)`` (each env starts episodes at
+    other steps, the first step included for one), and random carries to begin from."""
+    obs = (rng.normal(size=(steps, batch, n_obs)) * 2.0).astype(np.float32).astype(float)
+    starts = np.zeros((steps, batch), dtype=bool)
+    starts[0, 0] = True
+    starts[3, 1] = starts[7, 1] = True
+    starts[1:, 2] = rng.random(steps - 1) < 0.3
+
+    def carry() -> lstm.Carry:
+        return (jnp.asarray(rng.normal(size=(batch, H)) * 0.3),
+                jnp.asarray(rng.normal(size=(batch, H)) * 0.3))
+
+    return obs, starts, carry(), carry()
+
+
+def seq_major(x: np.ndarray) -> Any:
+    """``(T, B, ...)`` -> sb3-contrib's sequence-major batch ``(B·T, ...)``."""
+    x = np.swapaxes(np.asarray(x), 0, 1)
+    return t(x.reshape((-1, *x.shape[2:])))
+
+
+# ---------------------------------------------------------------------------- the cell
+def test_the_lstm_cell_is_torch_nn_lstm() -> None:
+    rng = np.random.default_rng(1)
+    torch.manual_seed(1)
+    layer = torch.nn.LSTM(3, 5).double()
+    xs = rng.normal(size=(9, 4, 3))
+    h0, c0 = rng.normal(size=(4, 5)), rng.normal(size=(4, 5))
+    out, (h, c) = layer(t(xs), (t(h0)[None], t(c0)[None]))
+    params = {"params": {name: jnp.asarray(getattr(layer, f"{name}_l0").detach().numpy())
+                         for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh")}}
+    cell = lstm.LSTMCell(5)
+    (h_, c_), outs = lstm.unroll(cell, params, (jnp.asarray(h0), jnp.asarray(c0)),
+                                 jnp.asarray(xs), jnp.zeros((9, 4), dtype=bool))
+    assert np.max(np.abs(np.asarray(outs) - out.detach().numpy())) < 1e-14
+    assert np.max(np.abs(np.asarray(c_) - c[0].detach().numpy())) < 1e-14
+    assert np.max(np.abs(np.asarray(h_) - h[0].detach().numpy())) < 1e-14
+
+
+def test_the_cell_is_cleared_at_an_episode_start_and_initialised_as_torch() -> None:
+    cell = lstm.LSTMCell(4)
+    params = cell.init(jax.random.PRNGKey(0), lstm.zeros(1, 4), jnp.zeros((1, 2)))
+    x = jnp.ones((2, 2))
+    carry = (jnp.full((2, 4), 7.0), jnp.full((2, 4), -3.0))
+    cleared = lstm.step(cell, params, carry, x, jnp.array([True, False]))
+    fresh = lstm.step(cell, params, lstm.zeros(2, 4), x, jnp.array([False, False]))
+    kept = cell.apply(params, carry, x)
+    assert np.array_equal(np.asarray(cleared[0][0]), np.asarray(fresh[0][0]))
+    assert np.array_equal(np.asarray(cleared[1][1]), np.asarray(kept[1][1]))
+    leaves = jax.tree.leaves(params)
+    assert all(np.max(np.abs(np.asarray(v))) <= 0.5 for v in leaves)      # U(±1/√4)
+    assert min(np.max(np.abs(np.asarray(v))) for v in leaves) > 0.2       # not all zeros
+
+
+# ---------------------------------------------------------------------------- the networks
+@pytest.fixture(scope="module")
+def orbit() -> tuple[RecurrentPPO, Any]:
+    env, params = jt.make_env(ORBIT, "recurrent")
+    return recurrent_algorithm(env, params)[0], env.observation_space(params).shape[0]
+
+
+def test_our_parameters_have_sb3_contribs_shapes(orbit: tuple[RecurrentPPO, Any]) -> None:
+    algo, n_obs = orbit
+    ts = algo.init_state(jax.random.PRNGKey(0))
+    actor, critic = ours_from_torch(torch_policy(n_obs))
+    for ours, theirs in ((ts.actor_ts.params, actor), (ts.critic_ts.params, critic)):
+        assert jax.tree.structure(ours) == jax.tree.structure(theirs)
+        assert jax.tree.map(np.shape, ours) == jax.tree.map(np.shape, theirs)
+    assert np.array_equal(np.asarray(ts.actor_ts.params["head"]["params"]["action_log_std"]),
+                          [-1.0])
+
+
+def test_sequences_give_sb3_contribs_values_log_probs_and_entropies(
+        orbit: tuple[RecurrentPPO, Any]) -> None:
+    algo, n_obs = orbit
+    policy = torch_policy(n_obs)
+    actor, critic = ours_from_torch(policy)
+    rng = np.random.default_rng(2)
+    obs, starts, actor0, critic0 = sequences(rng, 12, 3, n_obs)
+    actions = rng.normal(size=(12, 3, 1)) * 0.5
+    values, log_prob, entropy = policy.evaluate_actions(
+        seq_major(obs), seq_major(actions), torch_states(actor0, critic0), seq_major(starts))
+
+    _, latent = lstm.unroll(algo.cell, actor["lstm"], actor0, jnp.asarray(obs),
+                            jnp.asarray(starts))
+    ours_lp, ours_ent = algo.actor.apply(actor["head"], latent.reshape(36, H),
+                                         jnp.asarray(actions).reshape(36, 1),
+                                         method="log_prob_entropy")
+    _, latent_v = lstm.unroll(algo.cell, critic["lstm"], critic0, jnp.asarray(obs),
+                              jnp.asarray(starts))
+    ours_v = algo.critic.apply(critic["head"], latent_v.reshape(36, H))
+
+    def as_seq_major(x: Any) -> np.ndarray:
+        return np.swapaxes(np.asarray(x).reshape(12, 3), 0, 1).reshape(-1)
+
+    assert np.max(np.abs(as_seq_major(ours_lp) - log_prob.detach().numpy())) < 1e-12
+    assert np.max(np.abs(as_seq_major(ours_v) - values.detach().numpy()[:, 0])) < 1e-12
+    assert np.max(np.abs(np.asarray(ours_ent) - entropy.detach().numpy())) < 1e-12
+
+
+def test_step_by_step_gives_sb3_contribs_deterministic_actions(
+        orbit: tuple[RecurrentPPO, Any]) -> None:
+    algo, n_obs = orbit
+    policy = torch_policy(n_obs, seed=5)
+    actor, _ = ours_from_torch(policy)
+    rng = np.random.default_rng(3)
+    obs, starts, _, _ = sequences(rng, 10, 3, n_obs)
+    # predict()'s own lines, but for its cast of the LSTM state to float32: zeros to begin,
+    # _predict, the action clipped to the box
+    theirs_state = (torch.zeros(1, 3, H, dtype=torch.float64),) * 2
+    ours_carry = algo.policy_carry(3)
+    for step in range(10):
+        with torch.no_grad():
+            theirs, theirs_state = policy._predict(t(obs[step]), lstm_states=theirs_state,
+                                                   episode_starts=t(starts[step]),
+                                                   deterministic=True)
+        theirs = np.clip(theirs.numpy(), -1.0, 1.0)
+        ours_carry, ours = algo.policy_action(actor, ours_carry, jnp.asarray(obs[step]),
+                                              jnp.asarray(starts[step]))
+        assert np.max(np.abs(np.asarray(ours) - theirs)) < 1e-12
+        assert np.max(np.abs(np.asarray(ours_carry[1]) - theirs_state[1][0].numpy())) < 1e-12
+
+
+def sb3_loss(policy: Any, algo: RecurrentPPO, batch: dict[str, Any]) -> Any:
+    """RecurrentPPO.train's loss on one minibatch of whole sequences (sb3-contrib's lines: the
+    advantages normalised with th.std, the clipped surrogate, the entropy, vf_coef · mse)."""
+    values, log_prob, entropy = policy.evaluate_actions(
+        seq_major(batch["obs"]), seq_major(batch["action"]),
+        torch_states(batch["actor0"], batch["critic0"]), seq_major(batch["start"]))
+    advantages = seq_major(batch["advantages"])
+    advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    ratio = torch.exp(log_prob - seq_major(batch["log_prob"]))
+    surrogate = -torch.min(advantages * ratio,
+                           advantages * torch.clamp(ratio, 1 - algo.clip_eps,
+                                                    1 + algo.clip_eps)).mean()
+    value_loss = torch.mean((seq_major(batch["targets"]) - values.flatten()) ** 2)
+    return surrogate - algo.ent_coef * entropy.mean() + algo.vf_coef * value_loss
+
+
+def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO, Any]) -> None:
+    algo, n_obs = orbit
+    algo = algo.replace(ent_coef=0.01)              # the entropy term counts too
+    policy = torch_policy(n_obs, seed=7)
+    actor, critic = ours_from_torch(policy)
+    rng = np.random.default_rng(4)
+    obs, starts, actor0, critic0 = sequences(rng, 12, 3, n_obs)
+    batch = {"obs": obs, "start": starts, "actor0": actor0, "critic0": critic0,
+             "action": rng.normal(size=(12, 3, 1)) * 0.5,
+             "log_prob": rng.normal(size=(12, 3)) * 0.2 - 1.0,
+             "advantages": rng.normal(size=(12, 3)), "targets": rng.normal(size=(12, 3))}
+    sb3_loss(policy, algo, batch).backward()
+    theirs_actor, theirs_critic = ours_from_torch(
+        type("Grads", (), {"state_dict": lambda self: {
+            k: v.grad for k, v in policy.named_parameters()}})())
+
+    captured: dict[str, Any] = {}
+
+    class Capture:                        # a train state that records the gradients given
+        def __init__(self, name: str, params: Any) -> None:
+            self.name, self.params = name, params
+
+        def apply_gradients(self, grads: Any) -> Capture:
+            captured[self.name] = grads
+            return self
+
+    class TS:
+        def __init__(self) -> None:
+            self.actor_ts, self.critic_ts = Capture("actor", actor), Capture("critic", critic)
+
+        def replace(self, **kw: Any) -> TS:
+            return self
+
+    from fir_gym.jax.recurrent_ppo import RecurrentTrajectory, SequenceMinibatch
+    mb = SequenceMinibatch(
+        RecurrentTrajectory(jnp.asarray(obs), jnp.asarray(batch["action"]),
+                            jnp.asarray(batch["log_prob"]), None, None, None,
+                            jnp.asarray(starts)),
+        jnp.asarray(batch["advantages"]), jnp.asarray(batch["targets"]), actor0, critic0)
+    algo.update(TS(), mb)
+    worst = 0.0
+    for name, theirs in (("actor", theirs_actor), ("critic", theirs_critic)):
+        for ours_leaf, theirs_leaf in zip(jax.tree.leaves(captured[name]),
+                                          jax.tree.leaves(theirs), strict=True):
+            scale = max(1.0, float(np.max(np.abs(theirs_leaf))))
+            worst = max(worst, float(np.max(np.abs(np.asarray(ours_leaf) - theirs_leaf)))
+                        / scale)
+    assert worst < 1e-12, worst
+
+
+# ---------------------------------------------------------------------------- the rollout
+def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
+    """Ticker: three-step episodes cut by the time limit, two envs, seven steps. No
+    normalisation, so the stored reward is the plant's plus the bootstrap, computable here."""
+    env, params = Ticker(), TickerParams()
+    algo, _ = recurrent_algorithm(env, params, num_envs=2, num_steps=7, num_minibatches=1,
+                                  normalize_observations=False, normalize_rewards=False)
+    ts = algo.init_state(jax.random.PRNGKey(3))
+    policy = torch_policy(2, seed=9)
+    actor, critic = ours_from_torch(policy)
+    ts = ts.replace(actor_ts=ts.actor_ts.replace(params=actor),
+                    critic_ts=ts.critic_ts.replace(params=critic))
+    _, traj, began = jax.jit(algo.collect_trajectories)(ts)
+    assert not any(np.any(np.asarray(x)) for x in jax.tree.leaves(began))   # zeros
+    done = np.asarray(traj.done)
+    start = np.asarray(traj.start)
+    assert not start[0].any() and np.array_equal(start[1:], done[:-1])
+    assert np.array_equal(np.flatnonzero(done[:, 0]), [2, 5])
+
+    states = torch_states(began[0], began[1])
+    x = 0.5
+    for step in range(7):
+        obs = np.asarray(traj.obs[step])
+        assert np.allclose(obs[:, 0], x)
+        with torch.no_grad():
+            _, log_prob, _ = policy.evaluate_actions(t(obs), t(traj.action[step]), states,
+                                                     t(start[step]))
+            _, values, _, states = policy(t(obs), states, t(start[step]))
+            bootstrap = np.zeros(2)
+            if done[step, 0]:           # sb3-contrib: V(terminal obs), the critic's LSTM on
+                final = np.stack([x + 1.0, (x + 1.0) ** 2 / 4.0])   # from after the step
+                v = policy.predict_values(t(np.tile(final, (2, 1))), states.vf,
+                                          torch.zeros(2, dtype=torch.float64))
+                bootstrap = algo.gamma * v.numpy()[:, 0]
+        assert np.max(np.abs(np.asarray(traj.value[step]) - values.numpy()[:, 0])) < 1e-12
+        assert np.max(np.abs(np.asarray(traj.log_prob[step]) - log_prob.numpy())) < 1e-12
+        expected = -(x + 1.0) + bootstrap
+        assert np.max(np.abs(np.asarray(traj.reward[step]) - expected)) < 1e-12
+        x = 0.5 if done[step, 0] else x + 1.0
+
+
+# ---------------------------------------------------------------------------- learning
+CUE_STEPS = 6
+
+
+@struct.dataclass
+class CueState(environment.EnvState):
+    cue: jax.Array
+
+
+@struct.dataclass
+class CueParams(environment.EnvParams):
+    max_steps_in_episode: int = CUE_STEPS
+
+
+class Cue(environment.Environment):
+    """A task only memory solves: a cue ``c = ±1`` is shown at an episode's first step and
+    never again (the observation is 0 after it); every step pays ``-(a - c)²``.
+
+    A recurrent policy can return 0. A feed-forward one sees the same 0 at steps 1..5 whatever
+    the cue, so its action there is one number ``a`` for both cues and each such step pays at
+    best ``-(1 - m²)`` on episodes whose cues average ``m`` (at ``a = m``): over the episodes
+    below, ``-5 (1 - m²)`` at best (:func:`feed_forward_ceiling`).
+    """
+
+    @property
+    def default_params(self) -> CueParams:
+        return CueParams()
+
+    def reset_env(self, key: jax.Array, params: CueParams) -> Any:
+        cue = jnp.where(jax.random.bernoulli(key), 1.0, -1.0)
+        return jnp.stack([cue]), CueState(time=0, cue=cue)
+
+    def step_env(self, key: jax.Array, state: CueState, action: Any, params: CueParams
+                 ) -> Any:
+        reward = -jnp.square(jnp.squeeze(action) - state.cue)
+        new = CueState(time=state.time + 1, cue=state.cue)
+        return jnp.zeros(1), new, reward, jnp.asarray(False), {}
+
+    def observation_space(self, params: CueParams) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (1,), jnp.float64)
+
+    def action_space(self, params: Any = None) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
+
+
+def feed_forward_ceiling(keys: Any) -> float:
+    """The best mean return of any feed-forward deterministic policy on these episodes."""
+    # evaluate_policy resets episode i with the first half of its key's split
+    cues = np.array([float(Cue().reset(jax.random.split(k)[0], CueParams())[1].cue)
+                     for k in keys])
+    return -(CUE_STEPS - 1) * (1.0 - cues.mean() ** 2)
+
+
+def test_recurrent_ppo_learns_what_only_memory_solves() -> None:
+    algo, rec = recurrent_algorithm(Cue(), CueParams(), num_envs=16, num_steps=36,
+                                    num_minibatches=4, num_epochs=5, steps=36 * 16 * 30)
+    keys = jax.random.split(jax.random.PRNGKey(10_000), 40)
+    program = jax.jit(jt.training_program(algo, rec, checkpoints=1,
+                                          curve_episodes=1, episodes=40, eval_seed=10_000))
+    _, _, returns = program(algo.init_state(jax.random.PRNGKey(0)))
+    ceiling = feed_forward_ceiling(keys)
+    assert ceiling < -4.0
+    assert float(np.mean(returns)) > -0.5, (float(np.mean(returns)), ceiling)
