@@ -5,15 +5,26 @@ goes through :func:`make_plant`, the entry point every fir-gym id is registered
 with; :func:`wrap_observation` does the same for an existing env from one word
 (``"true"``, ``"measurement"`` or an estimator name), which is how
 ``fir-gym compare-controllers`` builds its three kinds of controller on equal terms.
+
+The plant's penalty horizon follows the time limit: ``gym.make(id, max_episode_steps=N)``
+wraps the env in Gymnasium's ``TimeLimit`` of ``N`` steps but does not pass ``N`` to the
+entry point, so :class:`PlantEntryPoint` reads the limit ``gymnasium.make`` is about to
+apply (:func:`make_time_limit`) and gives it to the plant as its ``max_episode_steps``
+before anything wraps it: a terminating step is then charged for exactly the steps left to
+``N`` (``envs/_base.py``, "Rewards and episode end").
 """
 
 from __future__ import annotations
 
 import copy
+import functools
+import inspect
 from collections.abc import Callable, Mapping
+from types import FrameType
 from typing import Any
 
 import gymnasium as gym
+from gymnasium.envs import registration
 from gymnasium.envs.registration import load_env_creator
 
 # The wrappers (and so the estimators and numba) are imported when an env is built, not
@@ -85,10 +96,50 @@ def make_plant(
                                 **dict(estimator_kwargs or {}))
 
 
+#: the code of :func:`gymnasium.make` (the caller whose time limit an entry point reads)
+_MAKE_CODE = registration.make.__code__
+
+
+def make_time_limit(frame: FrameType | None) -> int | None:
+    """The ``TimeLimit`` that :func:`gymnasium.make`, running in ``frame``, applies to the env
+    it is creating: its ``max_episode_steps`` argument, else its spec's — what ``make`` does
+    with them once the entry point returns. ``None`` when ``frame`` is not ``make``'s (the
+    entry point was called directly), for ``max_episode_steps=-1`` (``make`` applies no
+    ``TimeLimit``) and when neither gives a positive integer (``TimeLimit`` refuses it).
+    """
+    if frame is None or frame.f_code is not _MAKE_CODE:
+        return None
+    given = frame.f_locals.get("max_episode_steps")
+    if given == -1:
+        return None
+    steps = given if given is not None else getattr(frame.f_locals.get("env_spec"),
+                                                    "max_episode_steps", None)
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps <= 0:
+        return None
+    return steps
+
+
+def _with_horizon(creator: Callable[..., Any], steps: int, **kwargs: Any) -> Any:
+    """``creator(**kwargs)`` with its plant's penalty horizon set to ``steps`` (anything else
+    it builds is left as it is: :func:`make_plant` refuses what is not an env)."""
+    from fir_gym.envs._base import PlantEnv
+
+    env = creator(**kwargs)
+    plant = env.unwrapped if isinstance(env, gym.Env) else None
+    if isinstance(plant, PlantEnv):
+        plant.max_episode_steps = steps
+    return env
+
+
 class PlantEntryPoint:
     """The entry point of one plant: ``gym.make``'s creator, with the plant's ``metadata``.
 
-    Calling it is :func:`make_plant` for that plant. ``metadata`` (the plant class's, read
+    Calling it is :func:`make_plant` for that plant. Called by :func:`gymnasium.make`, it
+    gives the plant the time limit ``make`` applies as its ``max_episode_steps`` (the
+    horizon of its terminal penalty: :func:`make_time_limit`), whatever the plant's own
+    keywords say; with ``max_episode_steps=-1`` (no ``TimeLimit``) or called directly, the
+    plant keeps its own (its ``max_episode_steps`` keyword, else its class's default).
+    ``metadata`` (the plant class's, read
     when first asked, so registering imports no plant) is what :func:`gymnasium.make`
     reads to wrap an env as it wraps its own: ``render_mode="rgb_array_list"`` builds the
     plant with ``"rgb_array"`` inside :class:`gymnasium.wrappers.RenderCollection`, and
@@ -107,7 +158,13 @@ class PlantEntryPoint:
         return copy.deepcopy(getattr(load_env_creator(self.plant), "metadata", {}))
 
     def __call__(self, **kwargs: Any) -> gym.Env:
-        return make_plant(self.plant, **kwargs)
+        here = inspect.currentframe()
+        steps = make_time_limit(here.f_back if here is not None else None)
+        del here                                    # no reference cycle through the frame
+        if steps is None:
+            return make_plant(self.plant, **kwargs)
+        return make_plant(functools.partial(_with_horizon, load_env_creator(self.plant), steps),
+                          **kwargs)
 
     def __repr__(self) -> str:
         return f"PlantEntryPoint({self.plant!r})"

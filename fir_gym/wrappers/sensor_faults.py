@@ -74,7 +74,8 @@ def _sensor_setup(plant: Any, n_y: int) -> tuple[FloatArray, FloatArray]:
 
 def _episode_steps(env: Any, plant: Any) -> int | None:
     """The episode's length: the shorter of the plant's horizon and the env's time limit
-    (``gym.make(id, max_episode_steps=N)`` sets only the latter)."""
+    (``gym.make(id, max_episode_steps=N)`` gives ``N`` to the plant before it builds this
+    wrapper; a ``TimeLimit`` put on by hand may be shorter than the plant's horizon)."""
     spec = getattr(env, "spec", None)
     known = [int(n) for n in (getattr(plant, "max_episode_steps", None),
                               getattr(spec, "max_episode_steps", None)) if n]
