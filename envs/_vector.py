@@ -4,7 +4,8 @@
 plant's own (batched) hooks, so a step costs one call of the dynamics for the whole
 batch instead of ``num_envs`` Python-level steps. It follows Gymnasium's
 ``CartPoleVectorEnv``: its own episode counters and truncation at
-``max_episode_steps``, and *next-step* autoreset (``AutoresetMode.NEXT_STEP``): the
+``max_episode_steps`` (``None`` or ``-1``, as for ``gym.make``: none, the plant keeping its
+own penalty horizon), and *next-step* autoreset (``AutoresetMode.NEXT_STEP``): the
 step after a sub-environment terminates or is truncated resets it, ignores its
 action, and returns the first measurement of the new episode with reward 0 and
 ``terminated = truncated = False``.
@@ -94,9 +95,11 @@ class PlantVectorEnv(VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs <= 0:
             raise ValueError(f"num_envs must be a positive integer; got {num_envs!r}")
+        if max_episode_steps == -1:     # gym.make's "no TimeLimit" (make_vec passes it here)
+            max_episode_steps = None
         if max_episode_steps is not None and max_episode_steps <= 0:
-            raise ValueError(
-                f"max_episode_steps must be positive or None; got {max_episode_steps!r}")
+            raise ValueError(f"max_episode_steps must be positive, -1 or None (no truncation); "
+                             f"got {max_episode_steps!r}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array' for a native vector env; "
                              f"got {render_mode!r}")
