@@ -68,12 +68,18 @@ class does what must be identical everywhere:
   step on which a plant terminates (it left its physical domain) is paid
   ``-cost_cap * (1 + steps left to max_episode_steps)``: the terminal step and every
   step the episode would still have run, at the worst rate. Ending an episode early
-  therefore never improves its return. ``max_episode_steps`` is a constructor
-  argument defaulting to the registered time limit (``default_max_episode_steps``);
-  ``gym.make(id, max_episode_steps=N)`` sets only Gymnasium's ``TimeLimit``, so a
-  shorter ``N`` makes the penalty count more steps than remain (still honest); for a
-  longer one set ``env.unwrapped.max_episode_steps = N`` too (fir-gym's own tools,
-  the native vector env and :func:`fir_gym.training.make_sb3_vec_env` do).
+  therefore never improves its return. ``max_episode_steps`` (the penalty's horizon) is
+  a constructor argument defaulting to the registered time limit
+  (``default_max_episode_steps``), and it follows the ``TimeLimit`` Gymnasium applies:
+  ``gym.make(id, max_episode_steps=N)``, shorter or longer than the default, gives the
+  plant ``N`` (its entry point reads the limit ``gymnasium.make`` applies:
+  :class:`fir_gym.wrappers.factory.PlantEntryPoint`), and so do ``gym.make(env.spec)``,
+  the estimator options and ``gym.make_vec`` (whose native vector env gives its plant its
+  own ``max_episode_steps``). With ``max_episode_steps=-1`` (no ``TimeLimit``) the
+  plant keeps its own horizon (its keyword, else the default): no finite penalty covers
+  an episode without an end, so a user who ends episodes by some other rule after ``M``
+  steps sets ``env.unwrapped.max_episode_steps = M``, as does one who builds a plant
+  without ``gym.make`` and wraps it in a ``TimeLimit`` by hand.
 """
 
 from __future__ import annotations
