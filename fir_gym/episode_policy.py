@@ -100,8 +100,12 @@ def run_config(run: Path, env_id: str | None) -> RunConfig:
 
 
 def trained_policy(run: Path, algo: str, env: gym.Env) -> Policy:
-    """The run's deterministic policy, its observations normalised as in training (a JAX
-    run's seed: :class:`fir_gym.jax.policy.JaxPolicy`)."""
+    """The run's deterministic policy for one episode, its observations normalised as in
+    training (a JAX run's seed: :meth:`fir_gym.jax.policy.JaxPolicy.episode`). ``algo``: the
+    run's algorithm as its hyperparameter file names it (``RunConfig.algo_name``: ``ppo``,
+    ``sac``, or ``recurrent-ppo`` for the ``recurrent`` kind). A recurrent policy carries its
+    LSTM state from call to call, the first call starting the episode: play one episode with
+    it (``fir-gym watch`` does)."""
     found = jax_run(run)
     if found is not None:
         from ._extras import require
@@ -112,19 +116,32 @@ def trained_policy(run: Path, algo: str, env: gym.Env) -> Policy:
 
         folder, seed, _ = found
         result = load(folder)
-        return JaxPolicy(result, result.seeds.index(seed)).actions
+        return JaxPolicy(result, result.seeds.index(seed)).episode()
     try:
         from stable_baselines3 import PPO, SAC
         from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     except ModuleNotFoundError as err:
         raise MissingExtra(f"a run's policy needs stable-baselines3 ({err.name} is missing): "
                            f"{INSTALL['rl']}") from None
-    algorithm: Any = {"ppo": PPO, "sac": SAC}[algo]
+    algorithm: Any
+    if algo == "recurrent-ppo":
+        try:
+            from sb3_contrib import RecurrentPPO
+        except ModuleNotFoundError as err:
+            raise MissingExtra(f"a recurrent run's policy needs sb3-contrib ({err.name} is "
+                               f"missing): {INSTALL['rl']}") from None
+        algorithm = RecurrentPPO
+    else:
+        algorithm = {"ppo": PPO, "sac": SAC}[algo]
     model = algorithm.load(run / "model.zip", device="cpu")
     stats = VecNormalize.load(str(run / "vecnormalize.pkl"), DummyVecEnv([lambda: env]))
+    memory: dict[str, Any] = {"state": None, "start": np.ones(1, dtype=bool)}
 
     def act(obs: Any) -> NDArray[Any]:
-        action, _ = model.predict(stats.normalize_obs(obs), deterministic=True)
+        action, memory["state"] = model.predict(stats.normalize_obs(obs), state=memory["state"],
+                                                episode_start=memory["start"],
+                                                deterministic=True)
+        memory["start"] = np.zeros(1, dtype=bool)
         return np.asarray(action)
 
     return act

@@ -343,7 +343,7 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
     meta = {"env_id": config.env_id, "env_kwargs": kwargs, "estimator": estimator,
             "estimator_kwargs": estimator_kwargs, "policy": str(run),
             "observation": made.observation, "run_kind": kind, "run_algo": config.algo}
-    return env, trained_policy(run, config.algo, env), meta
+    return env, trained_policy(run, config.algo_name, env), meta
 
 
 # ---------------------------------------------------------------------- Minari

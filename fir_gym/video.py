@@ -240,7 +240,7 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
             raise ValueError("estimator_kwargs cannot change the estimator the run was "
                              "trained with")
         env = make_env(dataclasses.replace(config, env_kwargs=kwargs))
-    return env, trained_policy(run, config.algo, env)
+    return env, trained_policy(run, config.algo_name, env)
 
 
 # ---------------------------------------------------------------------- writers

@@ -6,9 +6,10 @@ episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` s
 :data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes, the kinds' options such as
 the windowed filters' horizon), its kinds per plant those of the robustness benchmark's
 learned grid on the nominal plant (:data:`fir_gym.robustness.plan.PLAIN_KINDS` and the
-plant's ``learned_estimators``: the rows of README.md's benchmark table) that the plant has
-in :data:`fir_gym.jax.registry.PLANTS` — all but ``recurrent``; PPO with the
-shipped recipe (:func:`fir_gym.jax.train.train`). Each row reports the IQM of the seeds'
+plant's ``learned_estimators``: the rows of README.md's benchmark table) that the JAX
+backend trains on the plant (:data:`fir_gym.jax.train.SUPPORTED`) — all of them; PPO with the
+shipped recipe (:func:`fir_gym.jax.train.train`; RecurrentPPO's for ``recurrent``,
+:mod:`fir_gym.jax.recurrent_ppo`). Each row reports the IQM of the seeds'
 mean returns and its 95 % interval from the same bootstrap as the SB3 benchmark's
 (:func:`fir_gym.training.stats.episode_bootstrap`: episodes, then seeds), on the JAX env's
 own episode draws and on the numpy env's SB3 episodes (:func:`play_in_numpy_env`), the compile
@@ -20,7 +21,7 @@ verdict: is the numpy-env IQM inside the SB3 interval?
 The classical ``lqg`` row (the LQR of the plant's nominal model on the EKF's estimate, as the
 SB3 benchmark runs it: nothing to train) is the numpy env's own —
 :func:`fir_gym.training.evaluation.evaluate` on the same episodes — so the table has every
-kind of README.md's but ``recurrent``; it has no JAX-env column, no times.
+kind of README.md's; that row has no JAX-env column, no times.
 """
 
 from __future__ import annotations
@@ -37,11 +38,11 @@ from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS
 from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
 
 from .registry import PLANTS as JAX_PLANTS
-from .train import save, train
+from .train import SUPPORTED, save, train
 
 #: the benchmark's learned kinds the JAX backend trains (every plant has a subset: its kinds)
-JAX_KINDS = ("true", "measurement", "measurement-stack", "ekf", "kf", "ukf", "efir", "fir",
-             "ufir")
+JAX_KINDS = ("true", "measurement", "measurement-stack", "recurrent", "ekf", "kf", "ukf",
+             "efir", "fir", "ufir")
 
 
 def chosen_plants(plants: list[str] | None = None) -> list[str]:
@@ -68,7 +69,7 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     for env_id in chosen:
         spec = PLANTS[env_id]
         planned = (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators)
-        have = [k for k in planned if k in JAX_PLANTS[env_id].kinds and k in JAX_KINDS]
+        have = [k for k in planned if k in SUPPORTED[env_id] and k in JAX_KINDS]
         for kind in have if kinds is None else [k for k in kinds if k in have]:
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],
@@ -156,7 +157,7 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
     policies = JaxPolicy.every_seed(result)
     kind, options = result.kind, dict(result.kind_kwargs)
     env = (make_single_env(result.env_id, observation="true", **plant) if kind == "true"
-           else make_single_env(result.env_id, **plant) if kind == "measurement"
+           else make_single_env(result.env_id, **plant) if kind in ("measurement", "recurrent")
            else make_single_env(result.env_id, observation="measurement-stack",
                                 stack_horizon=options.get("horizon"), **plant)
            if kind == "measurement-stack"
@@ -168,9 +169,9 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
             returns = []
             for episode in range(episodes):
                 obs, _ = env.reset(seed=seed + episode)
-                total, done = 0.0, False
+                total, done, act = 0.0, False, policy.episode()
                 while not done:
-                    obs, reward, terminated, truncated, _ = env.step(policy.actions(obs))
+                    obs, reward, terminated, truncated, _ = env.step(act(obs))
                     total, done = total + float(reward), terminated or truncated
                 returns.append(total)
             out.append(returns)

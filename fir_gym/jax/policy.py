@@ -21,12 +21,16 @@ import numpy as np
 class JaxPolicy:
     """Seed number ``index`` (a position in ``result.seeds``) of ``result``'s policies.
 
-    ``policy(obs)`` acts on one observation or a batch (``(n, n_obs)``), returning float32
-    actions of the same leading shape; ``policy(obs, episode_start, state)`` is the
-    robustness benchmark's policy signature (:data:`fir_gym.robustness.closed_loop.Policy`:
-    a feed-forward policy carries no state). :meth:`every_seed` gives one per seed sharing
-    one network and one compiled act (``acting``: what an earlier policy of the same result
-    built).
+    ``policy(obs, episode_start, state)`` is the robustness benchmark's policy signature
+    (:data:`fir_gym.robustness.closed_loop.Policy`), for one observation or a batch
+    (``(n, n_obs)``): float32 actions of the same leading shape, and the state to pass with
+    the next observations — ``None`` for a feed-forward policy, the LSTMs' carry for the
+    ``recurrent`` kind (:mod:`fir_gym.jax.recurrent_ppo`; ``state=None`` starts from zeros,
+    and ``episode_start`` clears the carry of the envs starting an episode, as sb3-contrib's
+    ``predict`` does). :meth:`actions` is the feed-forward shortcut; :meth:`episode` a
+    one-argument policy for one episode (``fir-gym watch``). :meth:`every_seed` gives one per
+    seed sharing one network and one compiled act (``acting``: what an earlier policy of the
+    same result built).
     """
 
     def __init__(self, result: Any, index: int, acting: Any = None) -> None:
@@ -38,9 +42,10 @@ class JaxPolicy:
             raise ValueError(f"index must be in [0, {len(result.seeds)}) for the run's seeds "
                              f"{result.seeds}; got {index!r}")
         self.seed = result.seeds[index]
+        self.kind = result.kind
         self.actor = jax.tree.map(lambda x: x[index], ts.actor_ts.params)
         self.rms = jax.tree.map(lambda x: x[index], ts.obs_rms_state)
-        self._act = _acting(result) if acting is None else acting
+        self._act, self._carry = _acting(result) if acting is None else acting
 
     @classmethod
     def every_seed(cls, result: Any) -> list[JaxPolicy]:
@@ -49,29 +54,60 @@ class JaxPolicy:
         acting = _acting(result)
         return [cls(result, i, acting) for i in range(len(result.seeds))]
 
-    def actions(self, obs: Any) -> np.ndarray:
-        """The deterministic actions for ``obs`` (one observation, or a batch)."""
-        x = np.asarray(obs, dtype=np.float64)
-        batch = x if x.ndim > 1 else x[None]
-        out = np.asarray(self._act(self.actor, self.rms, batch), dtype=np.float32)
-        return out if x.ndim > 1 else out[0]
+    @property
+    def recurrent(self) -> bool:
+        """Whether the policy carries a state from step to step (the ``recurrent`` kind)."""
+        return self._carry(1) is not None
 
     def __call__(self, obs: Any, episode_start: Any = None, state: Any = None
                  ) -> tuple[np.ndarray, Any]:
-        return self.actions(obs), None
+        x = np.asarray(obs, dtype=np.float64)
+        batch = x if x.ndim > 1 else x[None]
+        n = len(batch)
+        start = (np.full(n, state is None) if episode_start is None
+                 else np.asarray(episode_start, dtype=bool).reshape(n))
+        if state is None:
+            state = self._carry(n)
+        state, out = self._act(self.actor, self.rms, state, batch, start)
+        actions = np.asarray(out, dtype=np.float32)
+        return (actions if x.ndim > 1 else actions[0]), state
+
+    def actions(self, obs: Any) -> np.ndarray:
+        """The deterministic actions for ``obs`` (one observation, or a batch) of a
+        feed-forward policy; a recurrent one needs its state (``policy(obs, start, state)``)."""
+        if self.recurrent:
+            raise ValueError(f"the {self.kind} policy carries its LSTM state from step to step: "
+                             "call policy(obs, episode_start, state), or policy.episode()")
+        return self(obs)[0]
+
+    def episode(self) -> Any:
+        """A one-argument policy for one episode: ``act(obs) -> action``, the state carried
+        from call to call (the first call starts the episode)."""
+        memory: dict[str, Any] = {"state": None, "start": True}
+
+        def act(obs: Any) -> np.ndarray:
+            n = len(np.asarray(obs)) if np.ndim(obs) > 1 else 1
+            start = np.full(n, memory["start"])
+            action, memory["state"] = self(obs, start, memory["state"])
+            memory["start"] = False
+            return action
+
+        return act
 
 
-def _acting(result: Any) -> Any:
-    """The jitted ``(actor params, obs statistics, observations) -> actions`` of
-    ``result``'s network (its env and algorithm rebuilt from the run's keywords)."""
+def _acting(result: Any) -> tuple[Any, Any]:
+    """``(act, carry)`` of ``result``'s network (its env and algorithm rebuilt from the run's
+    keywords): the jitted ``(actor params, obs statistics, state, observations, starts) ->
+    (state, actions)`` (:meth:`fir_gym.jax.train.SB3LikePPO.policy_action`) and the state a
+    batch of ``n`` episodes starts from (``None`` for a feed-forward policy)."""
     from .train import make_algorithm, make_env
 
     env, params = make_env(result.env_id, result.kind, dict(result.env_kwargs),
                            result.kind_kwargs)
     algo = make_algorithm(env, params, result.recipe)
 
-    def act(actor: Any, rms: Any, obs: Any) -> Any:
+    def act(actor: Any, rms: Any, state: Any, obs: Any, start: Any) -> Any:
         seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
-        return algo.actor.apply(actor, seen, method="mean_action")
+        return algo.policy_action(actor, state, seen, start)
 
-    return jax.jit(act)
+    return jax.jit(act), algo.policy_carry

@@ -10,8 +10,9 @@ numpy envs, every condition and strength, plain and gated, the shared episodes),
 controllers, and the report is built from them the same way.
 
 **What the JAX backend trains** (:func:`refusal`): the kinds :data:`fir_gym.jax.train.
-SUPPORTED` lists (not ``recurrent``: those tasks are left out, and the report says so,
-``learned_skipped``), in every regime: on the nominal plant, under ``dr-mismatch``
+SUPPORTED` lists — every kind of the learned grid, ``recurrent`` included
+(:mod:`fir_gym.jax.recurrent_ppo`); a task it cannot train is left out and the report says
+so (``learned_skipped``) — in every regime: on the nominal plant, under ``dr-mismatch``
 (the truth's parameters drawn at every reset: :class:`fir_gym.jax.randomized.Randomized`)
 and under ``dr-dropout`` (the sensor's dropout:
 :meth:`fir_gym.jax._plant.FilteredPlant.reading_missing`, the filters predicting through a

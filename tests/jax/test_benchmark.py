@@ -31,9 +31,9 @@ def test_the_plan_is_the_sb3_benchmarks_for_the_plants_and_kinds_jax_has() -> No
         assert job["kind"] in (*PLAIN_KINDS, *plan.learned_estimators)
         assert job["kind_kwargs"] == plan.estimator_kwargs.get(job["kind"], {})
     assert {j["kind"] for j in jobs if j["env_id"] == "fir_gym/Orbit-v0"} == {
-        "true", "measurement", "measurement-stack", "ekf", "ukf", "efir"}
+        "true", "measurement", "measurement-stack", "recurrent", "ekf", "ukf", "efir"}
     assert {j["kind"] for j in jobs if j["env_id"] == "fir_gym/CarrierMotion-v0"} == {
-        "true", "measurement", "measurement-stack", "kf", "ukf", "fir", "ufir"}
+        "true", "measurement", "measurement-stack", "recurrent", "kf", "ukf", "fir", "ufir"}
     quick = benchmark.benchmark_plan(quick=True, seeds=3, plants=["fir_gym/Orbit-v0"],
                                      kinds=["ekf"])
     assert [(j["kind"], j["seeds"], j["steps"]) for j in quick] == [

@@ -43,7 +43,8 @@ def test_what_the_backend_leaves_out_is_named(tmp_path: Path) -> None:
     assert refusal(_task(tmp_path, "ekf", "nominal")) is None
     assert refusal(_task(tmp_path, "measurement-stack", "dr-mismatch")) is None
     assert refusal(_task(tmp_path, "efir", "dr-dropout")) is None
-    assert "no recurrent kind" in str(refusal(_task(tmp_path, "recurrent", "nominal")))
+    assert refusal(_task(tmp_path, "recurrent", "dr-dropout")) is None
+    assert "no ufir kind" in str(refusal(_task(tmp_path, "ufir", "nominal")))
     assert refusal(LearnedTask("fir_gym/CarrierMotion-v0", "ufir", "dr-dropout", 0, 2048, 3,
                                EVAL_SEED, (), "x")) is None
     tasks = [_task(tmp_path, k, r, s) for k in ("true", "ekf") for r in ("nominal",)

@@ -2,7 +2,8 @@
 :func:`fir_gym.jax.benchmark.play_in_numpy_env` and ``fir-gym evaluate --model RUN``.
 
 Tiny runs (two PPO iterations of the shipped 16 x 256 rollout, as tests/jax/test_train.py)
-of two seeds on Orbit ``true`` and on ``efir`` with an option (``horizon`` 5), on a plant
+of two seeds on Orbit ``true``, on ``efir`` with an option (``horizon`` 5) and on
+``recurrent`` (an LSTM policy whose state the players must carry), on a plant
 option (300-step episodes) so that the plant's keywords must travel through the folder too.
 The oracle of a loaded run is the run itself in memory: the same policies, bit for bit, and
 so the same returns on the same numpy episodes, exactly.
@@ -33,7 +34,7 @@ from fir_gym.jax.benchmark import play_in_numpy_env
 #: a plant option the run must keep: shorter episodes (also quicker to play)
 PLANT = {"max_episode_steps": 300}
 #: (kind, its options)
-KINDS = {"true": {}, "efir": {"horizon": 5}}
+KINDS = {"true": {}, "efir": {"horizon": 5}, "recurrent": {}}
 
 
 @pytest.fixture(scope="module")
@@ -144,8 +145,8 @@ def test_watch_and_record_play_a_jax_run(run: tuple[jt.JaxTraining, Path],
                                                                          index)
         assert config.env_kwargs == PLANT and config.kind_kwargs == KINDS[result.kind]
         env = make_env(config)
-        act = trained_policy(where, config.algo, env)
         for episode in range(2):
+            act = trained_policy(where, config.algo_name, env)       # one episode's policy
             obs, _ = env.reset(seed=10_000 + episode)
             total, done = 0.0, False
             while not done:
@@ -250,7 +251,7 @@ def corrupt(kind: str, folder: Path) -> str:
         results.write_text(json.dumps(data))
         return "backend is 'sb3'"
     if kind == "a kind not trained":
-        data["kind"] = "recurrent"
+        data["kind"] = "ufir"                   # CarrierMotion-v0's, not Orbit-v0's
         results.write_text(json.dumps(data))
         return "the jax backend trains"
     raise AssertionError(kind)

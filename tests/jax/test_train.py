@@ -136,6 +136,34 @@ def test_the_recipe_takes_overrides_and_policy_kwargs_as_sb3_does() -> None:
     assert rec.log_std_init == -0.5
 
 
+def test_the_recurrent_recipe_is_ppo_lstm_yml_translated() -> None:
+    from fir_gym.training import hyperparams
+
+    entry = hyperparams.hyperparameters("recurrent-ppo", ORBIT)
+    rec = jt.recipe(ORBIT, kind="recurrent")
+    assert entry["policy"] == "MlpLstmPolicy"
+    assert rec.lstm_hidden_size == entry["policy_kwargs"]["lstm_hidden_size"] == 64
+    assert rec.num_epochs == entry["n_epochs"] == 5
+    assert rec.num_minibatches == entry["n_steps"] * entry["n_envs"] // entry["batch_size"]
+    assert rec.num_envs % rec.num_minibatches == 0              # whole envs per minibatch
+    assert rec.log_std_init == entry["policy_kwargs"]["log_std_init"]
+    assert jt.recipe(ORBIT).lstm_hidden_size == 0                # every other kind: no LSTM
+    assert jt.recipe(ORBIT, kind="recurrent", algo_kwargs={
+        "policy_kwargs": {"lstm_hidden_size": 16}}).lstm_hidden_size == 16
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"policy_kwargs": {"shared_lstm": True, "enable_critic_lstm": False}}, "shared_lstm=False"),
+    ({"policy_kwargs": {"n_lstm_layers": 2}}, "n_lstm_layers=1"),
+    ({"batch_size": 384}, "whole envs' sequences"),       # 6 envs, 4 minibatches
+])
+def test_the_recurrent_recipe_refuses_another_lstm_arrangement(kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        jt.recipe(ORBIT, kind="recurrent", algo_kwargs=kwargs, n_envs=6)
+    with pytest.raises(ValueError, match="lstm_hidden_size"):     # not for other kinds
+        jt.recipe(ORBIT, algo_kwargs={"policy_kwargs": {"lstm_hidden_size": 8}})
+
+
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"use_sde": True}, "does not translate PPO setting"),
     ({"batch_size": 1000}, "divide the rollout"),
@@ -149,7 +177,7 @@ def test_the_recipe_refuses_what_it_cannot_translate(kwargs: dict, match: str) -
 
 # ---------------------------------------------------------------------------- the CLI
 @pytest.mark.parametrize("argv", [
-    ["--env", "fir_gym/VanDerPol-v0", "--kind", "recurrent"],
+    ["--env", "fir_gym/VanDerPol-v0", "--kind", "kf"],
     ["--env", ORBIT, "--kind", "fir"],
     ["--env", ORBIT, "--kind", "ekf", "--observation", "estimate+covariance"],
 ])
@@ -162,9 +190,8 @@ def test_the_cli_refuses_what_the_jax_backend_does_not_train(
     assert err.count("\n") == 1 and err.startswith("fir-gym train: error: the jax backend")
     assert "fir_gym/Orbit-v0" in err
     if "--observation" not in argv:
-        from fir_gym.jax.registry import PLANTS
-
-        assert f"with kind {', '.join(PLANTS[ORBIT].kinds)}" in err
+        assert f"with kind {', '.join(jt.SUPPORTED[ORBIT])}" in err
+        assert jt.SUPPORTED[ORBIT][-1] == "recurrent"
     assert not any(tmp_path.iterdir())
 
 
