@@ -21,7 +21,9 @@ rejax clips each gradient *element* with ``optax.clip``), Adam's ``eps = 1e-5`` 
 an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), SB3's orthogonal
 initialisation (gains √2, 0.01 for the mean, 1 for the value; rejax: flax's LeCun normal,
 which starts the mean action far from 0), the value loss
-unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``), observations
+unclipped (SB3's ``clip_range_vf=None``; rejax clips it with ``clip_eps``), each
+minibatch's advantages normalised by their unbiased standard deviation (SB3's ``th.std``;
+rejax: the biased one; :func:`actor_loss`), observations
 (and rewards) normalised then clipped to ``±clip_obs`` (``±clip_reward``) as
 ``VecNormalize`` does, and the bootstrap of episodes cut by the time limit
 (:meth:`SB3LikePPO.collect_trajectories`; rejax ends the return there): SB3's
@@ -41,6 +43,12 @@ last step (rejax's ``update_rew_rms``: ``r + (1 − done) γ R``), where ``VecNo
 (``_update_reward``, then ``returns[dones] = 0``) restarts it one step later; and the first
 observations of training are neither counted in the statistics nor normalised (SB3's
 ``VecNormalize.reset`` does both).
+
+**The recurrent kind** trains :class:`fir_gym.jax.recurrent_ppo.RecurrentPPO` (this class
+with sb3-contrib's LSTM policy) on the ``measurement`` env with the recipe of
+``ppo_lstm.yml`` (:func:`recipe` with ``kind="recurrent"``: ``Recipe.lstm_hidden_size``);
+the deterministic policy of every kind is :meth:`SB3LikePPO.policy_action`, with the state
+it carries from step to step (:meth:`SB3LikePPO.policy_carry`: none, or the LSTMs').
 
 **Returns** are what :func:`fir_gym.training.evaluate` reports: the undiscounted sum of the
 plant's raw reward over whole episodes, the policy deterministic (the Gaussian's mean,

@@ -296,6 +296,37 @@ def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO,
     assert worst < 1e-12, worst
 
 
+def test_minibatches_are_whole_envs_with_their_own_first_carries(
+        orbit: tuple[RecurrentPPO, Any]) -> None:
+    """Every env's sequence lands whole in exactly one minibatch, beside the carries its
+    rollout began with and its own advantages and targets."""
+    from fir_gym.jax.recurrent_ppo import RecurrentTrajectory, SequenceMinibatch
+
+    algo, _ = orbit
+    steps, envs = 5, algo.num_envs
+    tag = np.broadcast_to(np.arange(envs, dtype=float), (steps, envs))   # value = env index
+    column = jnp.asarray(tag)
+    traj = RecurrentTrajectory(column[..., None], column[..., None], column, column, column,
+                               column > 99, column > 99)
+    carry = (jnp.tile(jnp.arange(envs, dtype=float)[:, None], (1, H)),
+             -jnp.tile(jnp.arange(envs, dtype=float)[:, None], (1, H)))
+    batch = SequenceMinibatch(traj, column + 0.5, column + 0.25, carry, carry)
+    split = algo.split_envs(batch, jax.random.PRNGKey(4))
+    per = envs // algo.num_minibatches
+    assert split.trajectories.obs.shape == (algo.num_minibatches, steps, per, 1)
+    seen = []
+    for m in range(algo.num_minibatches):
+        who = np.asarray(split.trajectories.log_prob[m])           # (T, per)
+        assert (who == who[0]).all()                               # whole sequences
+        seen += list(who[0])
+        for got, offset in ((split.advantages[m], 0.5), (split.targets[m], 0.25)):
+            np.testing.assert_array_equal(np.asarray(got), who + offset)
+        for h, c in (split.actor_carry, split.critic_carry):          # (M, per, H) each
+            np.testing.assert_array_equal(np.asarray(h[m])[:, 0], who[0])
+            np.testing.assert_array_equal(np.asarray(c[m])[:, 0], -who[0])
+    assert sorted(seen) == list(range(envs)) and seen != list(range(envs))   # shuffled
+
+
 # ---------------------------------------------------------------------------- the rollout
 def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
     """Ticker: three-step episodes cut by the time limit, two envs, seven steps. No
