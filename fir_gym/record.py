@@ -315,7 +315,7 @@ def _run_env_and_policy(run: Path, env_id: str | None, estimator: str | None,
     made = recipe(kind, config.kind_kwargs, config.observation)
     steps = kwargs.get("max_episode_steps")
     plant = gym.make(config.env_id, **kwargs)
-    if steps is not None:                   # as training.vec_env.make_single_env does
+    if steps is not None and steps != -1:   # as training.vec_env.make_single_env does
         plant.unwrapped.max_episode_steps = int(steps)    # type: ignore[attr-defined]
     measured = MeasurementInInfo(plant)
     if made.estimator is not None:

@@ -240,3 +240,19 @@ def test_register_plant_ids_follow_the_limit_too():
         assert gym.make(env_id, max_episode_steps=-1).unwrapped.max_episode_steps == 300
     finally:
         del gym.registry[env_id]
+
+
+# ---------------------------------------------------------------------------- fir-gym's own callers
+@pytest.mark.parametrize("steps", [40, 2600, -1])
+def test_make_single_env_gives_the_plant_the_limit_and_keeps_the_default_without_one(steps):
+    """``fir_gym.training.make_single_env`` (what ``make_sb3_vec_env`` builds each
+    non-native sub-env with) sets the horizon by hand for ids registered otherwise; with
+    ``-1`` it once set it to -1, and a crash then paid one step's cost."""
+    vec_env = pytest.importorskip("fir_gym.training.vec_env")
+    env = vec_env.make_single_env("fir_gym/Orbit-v0", observation="true",
+                                  max_episode_steps=steps)
+    n = LIMIT["fir_gym/Orbit-v0"] if steps == -1 else steps
+    assert env.unwrapped.max_episode_steps == n
+    rewards, terminated = crash(env, "fir_gym/Orbit-v0")
+    assert terminated
+    assert_penalty_counts_the_steps_left_to(n, rewards, env.unwrapped.cost_cap)

@@ -334,7 +334,9 @@ def make_single_env(env_id: str, *, estimator: str | None = None,
     """
     steps = env_kwargs.get("max_episode_steps")
     env = gym.make(env_id, **env_kwargs)
-    if steps is not None:
+    # A fir-gym id's entry point has given the plant the limit already; this covers an id
+    # registered otherwise. -1: no TimeLimit, and the plant keeps its own horizon.
+    if steps is not None and steps != -1:
         cast(Any, env.unwrapped).max_episode_steps = int(steps)
     if estimator is not None:
         return wrap_observation(env, estimator, observation=observation,
