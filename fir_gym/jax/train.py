@@ -37,12 +37,12 @@ step's update); gymnax 1.0's ``info["final_observation"]``, ``info["truncated"]`
 separate gradient-norm clips for the actor and the critic (SB3: one optimiser over one
 summed loss; with separate networks only the clip differs); the minibatches must divide the
 rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one). Two
-differences of rejax's normalisation, one step of a long rollout each and so left as they
-are: the running discounted return behind the reward statistics restarts at an episode's
-last step (rejax's ``update_rew_rms``: ``r + (1 − done) γ R``), where ``VecNormalize``
-(``_update_reward``, then ``returns[dones] = 0``) restarts it one step later; and the first
-observations of training are neither counted in the statistics nor normalised (SB3's
-``VecNormalize.reset`` does both).
+differences of rejax's normalisation are matched too: the running discounted return behind
+the reward statistics restarts one step after an episode's last (``VecNormalize.
+_update_reward``, then ``returns[dones] = 0``; rejax's ``update_rew_rms``, ``r + (1 − done)
+γ R``, restarts it at the last step: :meth:`SB3LikePPO.update_rew_rms`), and the first
+observations of training are counted in the statistics and normalised, as
+``VecNormalize.reset`` does (:meth:`SB3LikePPO.init_state`).
 
 **The recurrent kind** trains :class:`fir_gym.jax.recurrent_ppo.RecurrentPPO` (this class
 with sb3-contrib's LSTM policy) on the ``measurement`` env with the recipe of
@@ -82,7 +82,7 @@ from flax.linen.initializers import constant  # noqa: E402
 from flax.training.train_state import TrainState  # noqa: E402
 from rejax import PPO  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
-from rejax.algos.mixins import RewardRMSState, RMSState  # noqa: E402
+from rejax.algos.mixins import RewardRMSState, RMSState, update_rms  # noqa: E402
 from rejax.algos.ppo import Trajectory  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
@@ -97,10 +97,6 @@ SUPPORTED: dict[str, tuple[str, ...]] = {env_id: (*p.kinds, "recurrent")
 UNMATCHED = (
     "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
     "optimiser, one clip over both)",
-    "reward statistics: the running return restarts at an episode's last step (VecNormalize: "
-    "one step later)",
-    "the first observations of training: not counted in the statistics, not normalised "
-    "(VecNormalize's reset does both)",
 )
 #: the algorithm settings the translation understands (stable-baselines3's PPO names)
 KNOWN_ALGO_KWARGS = ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma",
@@ -367,6 +363,24 @@ class SB3LikePPO(PPO):
         return {"rew_rms_state": RewardRMSState(
             mean=jnp.zeros(()), var=jnp.ones(()), count=jnp.asarray(1e-4),
             returns=jnp.zeros(self.num_envs))}
+
+    def init_state(self, rng: Any) -> Any:
+        """rejax's initial state, its first observations counted in the statistics and
+        normalised, as ``VecNormalize.reset`` does (rejax leaves them raw and uncounted)."""
+        ts = super().init_state(rng)
+        if self.normalize_observations:
+            rms, first = self.update_and_normalize_obs(ts.obs_rms_state, ts.last_obs)
+            ts = ts.replace(obs_rms_state=rms, last_obs=first)
+        return ts
+
+    def update_rew_rms(self, rms_state: Any, rewards: Any, dones: Any, batched: bool = True
+                       ) -> Any:
+        """``VecNormalize._update_reward`` and its reset of the finished envs' returns: the
+        running discounted return ``R ← γ R + r`` counted in the statistics, then set to 0
+        where an episode ended (rejax's ``r + (1 − done) γ R`` restarts it one step early)."""
+        returns = self.reward_normalization_discount * rms_state.returns + rewards
+        rms_state = update_rms(rms_state.replace(returns=returns), returns, batched=batched)
+        return rms_state.replace(returns=jnp.where(dones, 0.0, returns))
 
     def normalize_obs(self, rms_state: Any, x: Any) -> Any:
         return jnp.clip(super().normalize_obs(rms_state, x), -self.clip_obs, self.clip_obs)

@@ -75,8 +75,9 @@ def test_the_bootstrap_is_gamma_v_of_the_normalised_final_obs_at_a_truncation_on
         terminate_at: int, bootstrapped_steps: list[int]) -> None:
     """Our rewards minus rejax's, from the same state (the same actions and plant steps):
     exactly ``γ V(clip((final − mean) / sqrt(var + 1e-8), ±10))`` at a truncation, the
-    statistics after that step's update (SB3's ``RunningMeanStd`` replayed over the returned
-    observations), and exactly 0 at every other step, a termination included."""
+    statistics after that step's update (SB3's ``RunningMeanStd`` replayed over the first
+    observations, as ``VecNormalize.reset`` counts them, then the returned ones), and
+    exactly 0 at every other step, a termination included."""
     from stable_baselines3.common.running_mean_std import RunningMeanStd
 
     algo, ts = algorithm(terminate_at)
@@ -87,6 +88,7 @@ def test_the_bootstrap_is_gamma_v_of_the_normalised_final_obs_at_a_truncation_on
     added = np.asarray(ours.reward) - np.asarray(rejax.reward)
 
     rms = RunningMeanStd(shape=(2,))
+    rms.update(np.array([[X0, X0 * X0 / 4.0]] * 2))        # the reset's observations
     expected = np.zeros((STEPS, 2))
     for t, step in enumerate(replay(terminate_at)):
         rms.update(step["obs"])                     # the step's update, then the final obs
@@ -116,18 +118,16 @@ def test_the_final_obs_is_not_the_reset_obs_and_the_stats_update_once() -> None:
 
 
 # ---------------------------------------------------------------------------- against SB3
-def sb3_rewards(algo: jt.SB3LikePPO, ts: Any, terminate_at: int) -> np.ndarray:
+def sb3_rewards(algo: jt.SB3LikePPO, ts: Any, terminate_at: int, norm_reward: bool
+                ) -> np.ndarray:
     """SB3's rule computed by hand on SB3's own pipeline: a gymnasium twin of
     :class:`Ticker` in ``TimeLimit``, ``DummyVecEnv`` (which sets ``TimeLimit.truncated`` and
-    ``terminal_observation``), ``VecNormalize`` (observations only: rejax's reward
-    statistics reset the running return one step earlier than VecNormalize's, a difference
-    of their own), then ``reward + gamma * V(terminal_observation)`` where ``done`` and
-    ``TimeLimit.truncated``, as ``OnPolicyAlgorithm.collect_rollouts``. VecNormalize's reset
-    also updates the statistics by the first observations, which rejax's initial state does
-    not: the oracle starts its statistics afresh after the reset."""
+    ``terminal_observation``), ``VecNormalize`` (its statistics from its reset on, the
+    rewards' too where ``normalize_rewards``), then ``reward + gamma *
+    V(terminal_observation)`` where ``done`` and ``TimeLimit.truncated``, as
+    ``OnPolicyAlgorithm.collect_rollouts``."""
     import gymnasium as gym
     from gymnasium.wrappers import TimeLimit
-    from stable_baselines3.common.running_mean_std import RunningMeanStd
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     class TickerGym(gym.Env):
@@ -147,9 +147,9 @@ def sb3_rewards(algo: jt.SB3LikePPO, ts: Any, terminate_at: int) -> np.ndarray:
             return self.obs(), -self.x, self.time == terminate_at, False, {}
 
     venv = VecNormalize(DummyVecEnv([lambda: TimeLimit(TickerGym(), EPISODE)] * 2),
-                        norm_obs=True, norm_reward=False, clip_obs=10.0, gamma=algo.gamma)
+                        norm_obs=True, norm_reward=norm_reward, clip_obs=10.0,
+                        clip_reward=10.0, gamma=algo.gamma)
     venv.reset()
-    venv.obs_rms = RunningMeanStd(shape=(2,))
     rewards = np.zeros((STEPS, 2))
     for t in range(STEPS):
         _, reward, dones, infos = venv.step(np.zeros((2, 1), np.float32))
@@ -162,10 +162,29 @@ def sb3_rewards(algo: jt.SB3LikePPO, ts: Any, terminate_at: int) -> np.ndarray:
     return rewards
 
 
+@pytest.mark.parametrize("norm_reward", [False, True])
 @pytest.mark.parametrize("terminate_at", [0, EPISODE, 2])
-def test_the_rewards_are_sb3_rule_on_sb3_pipeline(terminate_at: int) -> None:
-    algo, ts = algorithm(terminate_at, normalize_rewards=False)
+def test_the_rewards_are_sb3_rule_on_sb3_pipeline(terminate_at: int, norm_reward: bool
+                                                  ) -> None:
+    """The whole of it on SB3's pipeline: the first observations counted and normalised, the
+    reward statistics' running return reset one step after an episode's end (VecNormalize's),
+    the bootstrap."""
+    algo, ts = algorithm(terminate_at, normalize_rewards=norm_reward)
     _, ours = jax.jit(algo.collect_trajectories)(ts)
     # VecNormalize hands float32 observations and rewards to the policy: float32 rounding
-    np.testing.assert_allclose(np.asarray(ours.reward), sb3_rewards(algo, ts, terminate_at),
+    np.testing.assert_allclose(np.asarray(ours.reward),
+                               sb3_rewards(algo, ts, terminate_at, norm_reward),
                                rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(ours.obs[0]), sb3_first_obs(algo), rtol=1e-6)
+
+
+def sb3_first_obs(algo: jt.SB3LikePPO) -> np.ndarray:
+    """What ``VecNormalize.reset`` returns on two Tickers: the first observations normalised
+    by statistics that have counted them."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    first = np.array([[X0, X0 * X0 / 4.0]] * 2)
+    rms = RunningMeanStd(shape=(2,))
+    rms.update(first)
+    return np.clip((first - rms.mean) / np.sqrt(rms.var + 1e-8), -10.0, 10.0)
+
