@@ -216,16 +216,25 @@ def train_jax(args: argparse.Namespace) -> int:
     call = {"steps": args.steps, "n_envs": args.n_envs, "algo_kwargs": args.algo_kwargs,
             "env_kwargs": args.env_kwargs, "hyperparams": args.hyperparams,
             "kind_kwargs": options, "checkpoints": checkpoints, "episodes": args.episodes}
-    if args.resume:            # a finished run of this call and code: nothing to train
-        done = jax_train.finished_run(args.out, args.env, args.estimator, seeds, **call)
-        if done is not None:
-            print(f"{jax_returns_line(args.env, args.estimator, done.final_returns)}; "
+    earlier = None
+    if args.resume:            # this call's run at this code: reuse it, or continue it
+        earlier = jax_train.finished_run(args.out, args.env, args.estimator, seeds, **call)
+        if earlier is not None and earlier.recipe.steps == rec.steps:
+            print(f"{jax_returns_line(args.env, args.estimator, earlier.final_returns)}; "
                   f"reused the finished run in {args.out} (--resume)")
             return 0
     with working(f"training {len(seeds)} seed(s) with jax", enabled=not args.no_progress):
-        result = jax_train.train(args.env, args.estimator, seeds, **call)
+        if earlier is not None:
+            more = rec.steps - earlier.steps_trained
+            result = jax_train.continue_training(
+                earlier, rec.steps, checkpoints=max(1, more // args.eval_freq)
+                if args.eval_freq else 10)
+        else:
+            result = jax_train.train(args.env, args.estimator, seeds, **call)
     out = jax_train.save(result, args.out)
-    print(f"{jax_returns_line(args.env, args.estimator, result.final_returns)}; saved in {out}")
+    how = (f"continued from {earlier.steps_trained} steps (--resume), saved in {out}"
+           if earlier is not None else f"saved in {out}")
+    print(f"{jax_returns_line(args.env, args.estimator, result.final_returns)}; {how}")
     print(f"jax: compile {result.compile_seconds:.1f} s (cache {result.cache}), train "
           f"{result.train_seconds:.1f} s for {result.steps_trained} steps x {len(seeds)} seeds",
           file=sys.stderr)

@@ -63,7 +63,7 @@ import json
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -114,6 +114,8 @@ LSTM_DEFAULTS = {"lstm_hidden_size": 256, "n_lstm_layers": 1, "shared_lstm": Fal
                  "enable_critic_lstm": True}
 ADAM_EPS = 1e-5
 CACHE_ENV = "FIR_GYM_JAX_CACHE"
+#: a run folder's whole training state (:func:`save`, :func:`continue_training`)
+STATE_FILE = "state.msgpack"
 
 
 def supported_line() -> str:
@@ -654,6 +656,9 @@ class JaxTraining:
     #: the evaluation settings of the call (``checkpoints``, ``curve_episodes``,
     #: ``episodes``, ``eval_seed``): with the fields above, everything :func:`train` was given
     settings: dict[str, Any] = field(default_factory=dict)
+    #: whether ``train_state`` is the whole training state (the optimisers, the statistics,
+    #: the envs, the keys: :func:`continue_training` can go on from it), not only the policies
+    resumable: bool = field(default=False, repr=False)
 
     @property
     def per_seed(self) -> list[float]:
@@ -672,7 +677,7 @@ class JaxTraining:
         return self.recipe.iterations * self.recipe.rollout
 
     def to_dict(self) -> dict[str, Any]:
-        data = {k: v for k, v in asdict(self).items() if k != "train_state"}
+        data = {k: v for k, v in asdict(self).items() if k not in ("train_state", "resumable")}
         data.update(per_seed=self.per_seed, iqm=self.iqm, steps_trained=self.steps_trained,
                     unmatched=list(UNMATCHED), backend="jax")
         return data
@@ -707,25 +712,82 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
                  hyperparams=hyperparams, kind=kind)
     env, params = make_env(env_id, kind, env_kwargs, kind_kwargs)
     algo = make_algorithm(env, params, rec)
-    program = jax.jit(jax.vmap(training_program(
-        algo, rec, checkpoints=checkpoints, curve_episodes=curve_episodes, episodes=episodes,
-        eval_seed=eval_seed)))
     start = time.perf_counter()
     initial = initial_states(algo, seed_list)
-    compiled = program.lower(initial).compile()
-    compiled_at = time.perf_counter()
-    ts, curve, final = jax.block_until_ready(compiled(initial))
-    done = time.perf_counter()
+    settings = {"checkpoints": checkpoints, "curve_episodes": curve_episodes,
+                "episodes": episodes, "eval_seed": eval_seed}
+    ts, curves, final, compiled_at, done = _run(algo, rec, initial, settings)
     k, per, _ = _segments(rec.iterations, checkpoints)
     return JaxTraining(
         env_id=env_id, kind=kind, seeds=seed_list, recipe=rec,
         checkpoint_steps=[(i + 1) * per * rec.rollout for i in range(k)],
-        curves=np.asarray(curve).mean(axis=-1).tolist(),
-        final_returns=np.asarray(final).tolist(),
+        curves=curves, final_returns=final,
         compile_seconds=compiled_at - start, train_seconds=done - compiled_at, cache=folder,
         train_state=ts, kind_kwargs=dict(kind_kwargs or {}), env_kwargs=dict(env_kwargs or {}),
-        settings={"checkpoints": checkpoints, "curve_episodes": curve_episodes,
-                  "episodes": episodes, "eval_seed": eval_seed})
+        settings=settings, resumable=True)
+
+
+def _run(algo: SB3LikePPO, rec: Recipe, initial: Any, settings: dict[str, Any]
+         ) -> tuple[Any, list[list[float]], list[list[float]], float, float]:
+    """Compile and run :func:`training_program` (``rec.iterations`` iterations) from the
+    stacked states ``initial``: ``(train state, curves [seed][checkpoint], final returns
+    [seed][episode], time compiled, time done)``."""
+    program = jax.jit(jax.vmap(training_program(algo, rec, **settings)))
+    compiled = program.lower(initial).compile()
+    compiled_at = time.perf_counter()
+    ts, curve, final = jax.block_until_ready(compiled(initial))
+    return (ts, np.asarray(curve).mean(axis=-1).tolist(), np.asarray(final).tolist(),
+            compiled_at, time.perf_counter())
+
+
+def continue_training(result: JaxTraining, steps: int, *, checkpoints: int = 10,
+                      cache: str | Path | bool | None = True) -> JaxTraining:
+    """Train ``result``'s run on to ``steps`` in all (SB3's ``model.learn`` once more): the
+    iterations the new budget adds, from the whole saved training state (the optimisers'
+    moments, the normalisation statistics, the envs mid-episode, the keys), so that the
+    continued run is the run that would have been trained straight to ``steps`` — bit for
+    bit (``tests/jax/test_train.py``). ``checkpoints`` evaluations along the added part extend
+    the curves; the final returns are the new final policies' (the run's evaluation
+    settings). ``result``: just trained (:func:`train`) or read from a folder that kept its
+    state (:func:`load`, ``state.msgpack``).
+
+    Raises:
+        ValueError: ``result`` has no whole training state, or ``steps`` adds no iteration.
+    """
+    if not result.resumable or result.train_state is None:
+        raise ValueError(f"{result.env_id} {result.kind}: the run kept its policies only (no "
+                         "state.msgpack), so it can be played, not trained further")
+    if isinstance(steps, bool) or not isinstance(steps, int):
+        raise ValueError(f"steps must be an integer; got {steps!r}")
+    rec = replace(result.recipe, steps=steps)
+    more = rec.iterations - result.recipe.iterations
+    if more <= 0:
+        raise ValueError(f"steps must be more than the {result.steps_trained} steps the run "
+                         f"has trained; got {steps}")
+    if isinstance(checkpoints, bool) or not isinstance(checkpoints, int) or checkpoints <= 0:
+        raise ValueError(f"checkpoints must be a positive integer; got {checkpoints!r}")
+    folder = str(enable_compilation_cache(None if cache is True else cache)) if cache else None
+    env, params = make_env(result.env_id, result.kind, result.env_kwargs, result.kind_kwargs)
+    algo = make_algorithm(env, params, rec)
+    part = replace(rec, steps=more * rec.rollout)
+    settings = {"curve_episodes": 8, "episodes": 20, "eval_seed": 10_000, **result.settings,
+                "checkpoints": checkpoints}
+    start = time.perf_counter()
+    ts, curves, final, compiled_at, done = _run(algo, part, result.train_state, settings)
+    k, per, _ = _segments(part.iterations, checkpoints)
+    trained = result.steps_trained
+    return JaxTraining(
+        env_id=result.env_id, kind=result.kind, seeds=list(result.seeds), recipe=rec,
+        checkpoint_steps=[*result.checkpoint_steps,
+                          *(trained + (i + 1) * per * rec.rollout for i in range(k))],
+        curves=[[*old, *new] for old, new in zip(result.curves, curves, strict=True)],
+        final_returns=final,
+        compile_seconds=result.compile_seconds + (compiled_at - start),
+        train_seconds=result.train_seconds + (done - compiled_at), cache=folder,
+        train_state=ts, kind_kwargs=dict(result.kind_kwargs),
+        env_kwargs=dict(result.env_kwargs),
+        settings={**settings, "checkpoints": len(result.checkpoint_steps) + k},
+        resumable=True)
 
 
 def save(result: JaxTraining, out: str | Path) -> Path:
@@ -733,7 +795,9 @@ def save(result: JaxTraining, out: str | Path) -> Path:
     and their keywords, the seeds, the recipe, the returns), ``code_version.txt`` and, per
     seed, ``seed<s>/policy.msgpack`` (the actor's and critic's parameters and the observation
     normalisation statistics, flax-serialised, and under ``run`` the run it belongs to:
-    :func:`_identity`). :func:`load` reads it back."""
+    :func:`_identity`) and, for a run that has it, ``state.msgpack``: the whole training
+    state of every seed, from which :func:`continue_training` goes on. :func:`load` reads it
+    back."""
     from flax import serialization
 
     from fir_gym.code_version import code_version
@@ -752,6 +816,11 @@ def save(result: JaxTraining, out: str | Path) -> Path:
                                    result.env_kwargs, result.kind_kwargs)
             (out / f"seed{seed}").mkdir(exist_ok=True)
             (out / f"seed{seed}" / "policy.msgpack").write_bytes(serialization.to_bytes(one))
+    state_file = out / STATE_FILE
+    if ts is not None and result.resumable:
+        state_file.write_bytes(serialization.to_bytes(ts))
+    elif state_file.exists():                  # another run's: it must not be continued
+        state_file.unlink()
     return out
 
 
@@ -763,15 +832,18 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
                  curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000
                  ) -> JaxTraining | None:
     """The run in ``out`` (:func:`load`) if it is the one :func:`train` with these arguments
-    would make — the same plant, kind, seeds, recipe, keywords and evaluation settings, and
-    the same :func:`~fir_gym.code_version.code_version` — else ``None`` (nothing there, or
-    the same run at other code: train it again). ``fir-gym train --backend jax --resume``
-    skips a finished run this way; a JAX run writes its folder only when it has finished, so
-    there is never a part of one to continue.
+    would make, or the same run trained for fewer steps that kept its training state — the
+    same plant, kind, seeds, recipe but its budget, keywords and evaluation settings (the
+    number of ``checkpoints`` aside: it samples the curve, it does not change the training),
+    at the same :func:`~fir_gym.code_version.code_version` — else ``None`` (nothing there, the
+    same run at other code, or fewer steps without the state: train it again). ``fir-gym
+    train --backend jax --resume`` skips the finished run (``result.recipe.steps == steps``)
+    and continues the shorter one (:func:`continue_training`).
 
     Raises:
-        ValueError: ``out`` holds another run (another configuration, or another backend's):
-            naming what differs, so that nothing is overwritten by mistake.
+        ValueError: ``out`` holds another run (another configuration, one trained for more
+            steps, or another backend's): naming what differs, so that nothing is overwritten
+            by mistake.
     """
     from fir_gym.code_version import code_version
 
@@ -787,12 +859,20 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
     wanted = {"env_id": env_id, "kind": kind, "seeds": [int(s) for s in seeds],
               "recipe": asdict(rec), "env_kwargs": dict(env_kwargs or {}),
               "kind_kwargs": dict(kind_kwargs or {}),
-              "settings": {"checkpoints": checkpoints, "curve_episodes": curve_episodes,
-                           "episodes": episodes, "eval_seed": eval_seed}}
+              "settings": {"curve_episodes": curve_episodes, "episodes": episodes,
+                           "eval_seed": eval_seed}}
     as_saved = json.loads(json.dumps(wanted))
+    mine = dict(saved)
     if "settings" not in saved:                 # written before the settings were recorded
         as_saved.pop("settings")
-    differ = [k for k, v in as_saved.items() if saved.get(k) != v]
+    else:
+        mine["settings"] = {k: v for k, v in saved["settings"].items() if k != "checkpoints"}
+    saved_steps = (saved.get("recipe") or {}).get("steps")
+    if isinstance(mine.get("recipe"), dict):
+        mine["recipe"] = {**mine["recipe"], "steps": rec.steps}
+    differ = [k for k, v in as_saved.items() if mine.get(k) != v]
+    if not differ and isinstance(saved_steps, int) and saved_steps > rec.steps:
+        differ = [f"steps ({saved_steps} > {rec.steps})"]
     if differ:
         raise ValueError(f"--out {folder} holds another run (its {', '.join(differ)} differ "
                          "from this one's): give another folder, or leave out --resume to "
@@ -800,6 +880,8 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
     version = folder / "code_version.txt"
     if ("settings" not in saved or not version.is_file()
             or version.read_text().strip() != code_version()):
+        return None
+    if saved_steps != rec.steps and not (folder / STATE_FILE).is_file():
         return None
     return load(folder)
 
@@ -922,11 +1004,35 @@ def load(run_dir: str | Path) -> JaxTraining:
         actor_ts=initial.actor_ts.replace(params=stacked["actor"]),
         critic_ts=initial.critic_ts.replace(params=stacked["critic"]),
         obs_rms_state=stacked["obs_rms"])
+    whole = _read_state(folder / STATE_FILE, initial, stacked)
     return JaxTraining(
         env_id=env_id, kind=kind, seeds=seeds, recipe=rec,
         checkpoint_steps=list(data.get("checkpoint_steps", [])),
         curves=list(data.get("curves", [])), final_returns=list(data.get("final_returns", [])),
         compile_seconds=float(data.get("compile_seconds", math.nan)),
         train_seconds=float(data.get("train_seconds", math.nan)), cache=data.get("cache"),
-        train_state=state, kind_kwargs=kind_kwargs, env_kwargs=env_kwargs,
-        settings=dict(data.get("settings") or {}))
+        train_state=state if whole is None else whole, kind_kwargs=kind_kwargs,
+        env_kwargs=env_kwargs, settings=dict(data.get("settings") or {}),
+        resumable=whole is not None)
+
+
+def _read_state(path: Path, template: Any, policies: dict[str, Any]) -> Any:
+    """A folder's ``state.msgpack`` restored into ``template``'s structure (the stacked
+    initial states), or ``None`` where there is none; refused in one line where it does not
+    fit the template or holds other policies than the seed files (``policies``)."""
+    from flax import serialization
+
+    if not path.is_file():
+        return None
+    try:
+        whole = serialization.from_bytes(template, path.read_bytes())
+    except Exception as err:                 # msgpack's and flax's errors have no common base
+        raise ValueError(f"{path} is not this run's training state ({type(err).__name__}: "
+                         f"{str(err)[:120]})") from None
+    mine = {"actor": whole.actor_ts.params, "critic": whole.critic_ts.params,
+            "obs_rms": whole.obs_rms_state}
+    for a, b in zip(jax.tree.leaves(mine), jax.tree.leaves(policies), strict=True):
+        if np.shape(a) != np.shape(b) or not np.array_equal(np.asarray(a), np.asarray(b)):
+            raise ValueError(f"{path} is not this run's training state: its policies differ "
+                             "from the seed folders'")
+    return whole

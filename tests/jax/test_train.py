@@ -7,6 +7,7 @@ by a wide margin. The compilation cache is a temporary folder of this module.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -99,6 +100,51 @@ def test_save_writes_a_run_folder(two_seeds: jt.JaxTraining, tmp_path: Path) -> 
     actor = jax.tree.leaves(two_seeds.train_state.actor_ts.params)
     for a, b in zip(saved, actor, strict=True):
         np.testing.assert_array_equal(a, np.asarray(b)[1])
+
+
+# ---------------------------------------------------------------------------- continuing
+def whole_state(result: jt.JaxTraining) -> list[np.ndarray]:
+    return [np.asarray(leaf) for leaf in jax.tree.leaves(result.train_state)]
+
+
+@pytest.mark.parametrize("kind", ["measurement", "recurrent"])
+def test_a_continued_run_is_the_run_trained_straight_bit_for_bit(kind: str, cache: Path,
+                                                                 tmp_path: Path) -> None:
+    """Two iterations, saved, loaded and continued to four equal four iterations straight:
+    every leaf of the training state (weights, Adam's moments, statistics, envs, keys), the
+    curves and the final returns — for the feed-forward and the recurrent PPO."""
+    settings = {k: v for k, v in TINY.items() if k != "steps"}
+    straight = jt.train(ORBIT, kind, [0, 1], cache=cache, **{**settings, "checkpoints": 4},
+                        steps=16384)
+    first = jt.train(ORBIT, kind, [0, 1], cache=cache, **TINY)
+    loaded = jt.load(jt.save(first, tmp_path / "run"))
+    assert loaded.resumable and (tmp_path / "run" / jt.STATE_FILE).is_file()
+    for a, b in zip(whole_state(loaded), whole_state(first), strict=True):
+        np.testing.assert_array_equal(a, b)
+    on = jt.continue_training(loaded, 16384, checkpoints=2, cache=cache)
+    assert on.steps_trained == straight.steps_trained == 16384
+    assert on.checkpoint_steps == straight.checkpoint_steps == [4096, 8192, 12288, 16384]
+    mine, theirs = whole_state(on), whole_state(straight)
+    assert len(mine) == len(theirs)
+    for a, b in zip(mine, theirs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert on.curves == straight.curves and on.final_returns == straight.final_returns
+    assert on.settings["checkpoints"] == 4 and on.recipe == straight.recipe
+
+
+def test_a_run_without_its_state_is_played_not_continued(two_seeds: jt.JaxTraining,
+                                                         tmp_path: Path) -> None:
+    out = jt.save(two_seeds, tmp_path / "run")
+    (out / jt.STATE_FILE).unlink()                      # a folder of before the state file
+    loaded = jt.load(out)
+    assert not loaded.resumable
+    with pytest.raises(ValueError, match="can be played, not trained further"):
+        jt.continue_training(loaded, 16384)
+    with pytest.raises(ValueError, match="more than the 8192 steps"):
+        jt.continue_training(two_seeds, 8192)
+    (out / jt.STATE_FILE).write_bytes(b"\xc1 not msgpack")
+    with pytest.raises(ValueError, match="is not this run's training state"):
+        jt.load(out)
 
 
 # ---------------------------------------------------------------------------- the recipe
@@ -224,7 +270,7 @@ def test_the_cli_trains_and_writes_the_run_folder(tmp_path: Path, cache: Path,
                  "--no-progress", "--out", str(out)]) == 0
     assert "over 2 episodes x 2 seed(s)" in capsys.readouterr().out
     assert {p.name for p in out.iterdir()} == {"results.json", "code_version.txt", "seed0",
-                                               "seed1"}
+                                               "seed1", jt.STATE_FILE}
     assert main(["evaluate", "--model", str(out), "--episodes", "2", "--no-progress"]) == 0
     assert "over 2 episodes x 2 seed(s)" in capsys.readouterr().out   # the folder plays
     # --resume: the same call and code reuse the finished run (nothing trained, nothing
@@ -239,8 +285,15 @@ def test_the_cli_trains_and_writes_the_run_folder(tmp_path: Path, cache: Path,
     assert main([*args[:-3], "--seeds", "3", "--resume", "--out", str(out)]) == 2
     assert "holds another run (its seeds differ" in capsys.readouterr().err
     assert (out / "results.json").read_text() == before
+    # --resume with more steps continues the run from its saved state; fewer is refused
+    assert main([*args[:7], "--steps", "12288", *args[9:]]) == 0
+    assert "continued from 8192 steps (--resume)" in capsys.readouterr().out
+    data = json.loads((out / "results.json").read_text())
+    assert data["steps_trained"] == 12288 and data["checkpoint_steps"][-1] == 12288
+    assert main(args) == 2
+    assert "its steps (12288 > 8192) differ" in capsys.readouterr().err
     (out / "code_version.txt").write_text("older code\n")    # the same run at other code
-    assert jt.finished_run(out, ORBIT, "measurement", [0, 1], steps=8192, episodes=2,
+    assert jt.finished_run(out, ORBIT, "measurement", [0, 1], steps=12288, episodes=2,
                            checkpoints=2) is None
 
 
