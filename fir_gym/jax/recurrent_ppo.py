@@ -44,7 +44,6 @@ from fir_gym._extras import require
 
 require("jax", "gymnax", "rejax")
 
-import chex  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import optax  # noqa: E402
@@ -67,13 +66,13 @@ class RecurrentTrajectory(struct.PyTreeNode):
     """One rollout, time first (``(num_steps, num_envs, ...)``): rejax's ``Trajectory`` and
     each step's episode-start flag (the LSTMs' carries are cleared before that step)."""
 
-    obs: chex.Array
-    action: chex.Array
-    log_prob: chex.Array
-    reward: chex.Array
-    value: chex.Array
-    done: chex.Array
-    start: chex.Array
+    obs: jax.Array
+    action: jax.Array
+    log_prob: jax.Array
+    reward: jax.Array
+    value: jax.Array
+    done: jax.Array
+    start: jax.Array
 
 
 class SequenceMinibatch(struct.PyTreeNode):
@@ -81,8 +80,8 @@ class SequenceMinibatch(struct.PyTreeNode):
     and the carries their rollout began with."""
 
     trajectories: RecurrentTrajectory
-    advantages: chex.Array
-    targets: chex.Array
+    advantages: jax.Array
+    targets: jax.Array
     actor_carry: Any
     critic_carry: Any
 
