@@ -46,13 +46,11 @@ require("jax", "gymnax", "rejax")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import optax  # noqa: E402
 from flax import struct  # noqa: E402
-from flax.training.train_state import TrainState  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 
 from . import lstm  # noqa: E402
-from .train import ADAM_EPS, SB3LikePPO, actor_loss  # noqa: E402
+from .train import SB3LikePPO, actor_loss  # noqa: E402
 
 #: where this training differs from sb3-contrib's RecurrentPPO (besides SB3LikePPO's own)
 UNMATCHED = (
@@ -106,10 +104,7 @@ class RecurrentPPO(SB3LikePPO):
                  "head": self.actor.init(keys[1], latent, keys[1])}
         critic = {"lstm": self.cell.init(keys[2], carry, jnp.zeros((1, n_obs))),
                   "head": self.critic.init(keys[3], latent)}
-        tx = optax.chain(optax.clip_by_global_norm(self.max_grad_norm),
-                         optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS))
-        return {"actor_ts": TrainState.create(apply_fn=(), params=actor, tx=tx),
-                "critic_ts": TrainState.create(apply_fn=(), params=critic, tx=tx)}
+        return self.train_states(actor, critic)
 
     @register_init
     def initialize_lstm_carries(self, rng: Any) -> dict[str, Any]:
@@ -149,11 +144,7 @@ class RecurrentPPO(SB3LikePPO):
         began = (ts.actor_carry, ts.critic_carry)
 
         def env_step(ts: Any, unused: Any) -> Any:
-            rng, new_rng = jax.random.split(ts.rng)
-            ts = ts.replace(rng=rng)
-            rng_steps, rng_action = jax.random.split(new_rng, 2)
-            rng_steps = jax.random.split(rng_steps, self.num_envs)
-
+            ts, rng_steps, rng_action = self.step_keys(ts)
             start = ts.last_done
             actor_carry, latent = self.actor_step(ts.actor_ts.params, ts.actor_carry,
                                                   ts.last_obs, start)
@@ -161,22 +152,10 @@ class RecurrentPPO(SB3LikePPO):
                 ts.actor_ts.params["head"], latent, rng_action, method="action_log_prob")
             critic_carry, value = self.critic_step(ts.critic_ts.params, ts.critic_carry,
                                                    ts.last_obs, start)
-            space = self.env.action_space(self.env_params)
-            action = jnp.clip(unclipped_action, space.low, space.high)
-
-            next_obs, env_state, reward, done, info = self.vmap_step(
-                rng_steps, ts.env_state, action, self.env_params)
+            # the carries after this step first: the bootstrap's critic continues from them
             ts = ts.replace(actor_carry=actor_carry, critic_carry=critic_carry)
-            if self.normalize_observations:
-                obs_rms_state, next_obs = self.update_and_normalize_obs(ts.obs_rms_state,
-                                                                        next_obs)
-                ts = ts.replace(obs_rms_state=obs_rms_state)
-            if self.normalize_rewards:
-                rew_rms_state, reward = self.update_and_normalize_rew(ts.rew_rms_state,
-                                                                      reward, done)
-                ts = ts.replace(rew_rms_state=rew_rms_state)
-            reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
-
+            ts, next_obs, env_state, reward, done = self.step_envs(ts, rng_steps,
+                                                                   unclipped_action)
             transition = RecurrentTrajectory(ts.last_obs, unclipped_action, log_prob, reward,
                                              value, done, start)
             ts = ts.replace(env_state=env_state, last_obs=next_obs, last_done=done,

@@ -346,8 +346,12 @@ class SB3LikePPO(PPO):
     def initialize_network_params(self, rng: Any) -> dict[str, Any]:
         rng, rng_actor, rng_critic = jax.random.split(rng, 3)
         obs = jnp.empty([1, *self.env.observation_space(self.env_params).shape])
-        actor_params = self.actor.init(rng_actor, obs, rng_actor)
-        critic_params = self.critic.init(rng_critic, obs)
+        return self.train_states(self.actor.init(rng_actor, obs, rng_actor),
+                                 self.critic.init(rng_critic, obs))
+
+    def train_states(self, actor_params: Any, critic_params: Any) -> dict[str, Any]:
+        """The actor's and the critic's train states: each its own Adam (SB3's ``eps``) after
+        a global-norm clip of its gradient."""
         tx = optax.chain(optax.clip_by_global_norm(self.max_grad_norm),
                          optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS))
         return {"actor_ts": TrainState.create(apply_fn=(), params=actor_params, tx=tx),
@@ -425,29 +429,12 @@ class SB3LikePPO(PPO):
         rest is rejax's, line for line (the ``done`` of a truncation still ends the return
         in :meth:`calculate_gae`, as SB3's ``episode_starts`` do)."""
         def env_step(ts: Any, unused: Any) -> Any:
-            rng, new_rng = jax.random.split(ts.rng)
-            ts = ts.replace(rng=rng)
-            rng_steps, rng_action = jax.random.split(new_rng, 2)
-            rng_steps = jax.random.split(rng_steps, self.num_envs)
-
+            ts, rng_steps, rng_action = self.step_keys(ts)
             unclipped_action, log_prob = self.actor.apply(
                 ts.actor_ts.params, ts.last_obs, rng_action, method="action_log_prob")
             value = self.critic.apply(ts.critic_ts.params, ts.last_obs)
-            space = self.env.action_space(self.env_params)
-            action = jnp.clip(unclipped_action, space.low, space.high)
-
-            next_obs, env_state, reward, done, info = self.vmap_step(
-                rng_steps, ts.env_state, action, self.env_params)
-            if self.normalize_observations:
-                obs_rms_state, next_obs = self.update_and_normalize_obs(ts.obs_rms_state,
-                                                                        next_obs)
-                ts = ts.replace(obs_rms_state=obs_rms_state)
-            if self.normalize_rewards:
-                rew_rms_state, reward = self.update_and_normalize_rew(ts.rew_rms_state,
-                                                                      reward, done)
-                ts = ts.replace(rew_rms_state=rew_rms_state)
-            reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
-
+            ts, next_obs, env_state, reward, done = self.step_envs(ts, rng_steps,
+                                                                   unclipped_action)
             transition = Trajectory(ts.last_obs, unclipped_action, log_prob, reward, value,
                                     done)
             ts = ts.replace(env_state=env_state, last_obs=next_obs, last_done=done,
@@ -455,6 +442,33 @@ class SB3LikePPO(PPO):
             return ts, transition
 
         return jax.lax.scan(env_step, ts, None, self.num_steps)
+
+    def step_keys(self, ts: Any) -> tuple[Any, Any, Any]:
+        """``(ts, the envs' step keys, the action's key)``: one rollout step's keys from
+        ``ts.rng`` (rejax's splits)."""
+        rng, new_rng = jax.random.split(ts.rng)
+        rng_steps, rng_action = jax.random.split(new_rng, 2)
+        return ts.replace(rng=rng), jax.random.split(rng_steps, self.num_envs), rng_action
+
+    def step_envs(self, ts: Any, rng_steps: Any, unclipped_action: Any
+                  ) -> tuple[Any, Any, Any, Any, Any]:
+        """The envs' part of a rollout step, after the policy acted: the action clipped to
+        the box, every env stepped, the observation and reward statistics updated and both
+        normalised, the time-limit bootstrap added (:meth:`truncation_bootstrap`, the critic
+        as ``ts`` has it). Returns ``(ts, next observations, env states, rewards, dones)``."""
+        space = self.env.action_space(self.env_params)
+        action = jnp.clip(unclipped_action, space.low, space.high)
+        next_obs, env_state, reward, done, info = self.vmap_step(
+            rng_steps, ts.env_state, action, self.env_params)
+        if self.normalize_observations:
+            obs_rms_state, next_obs = self.update_and_normalize_obs(ts.obs_rms_state, next_obs)
+            ts = ts.replace(obs_rms_state=obs_rms_state)
+        if self.normalize_rewards:
+            rew_rms_state, reward = self.update_and_normalize_rew(ts.rew_rms_state, reward,
+                                                                  done)
+            ts = ts.replace(rew_rms_state=rew_rms_state)
+        reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
+        return ts, next_obs, env_state, reward, done
 
     def update_actor(self, ts: Any, batch: Any) -> Any:
         def loss(params: Any) -> Any:
