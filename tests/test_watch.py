@@ -104,6 +104,22 @@ def test_watch_a_run_returns_exactly_its_evaluation_return(runs, tmp_path):
     assert rec.steps == 30 and rec.frames == 2
 
 
+def test_watch_a_recurrent_run_carries_its_lstm_state(tmp_path):
+    """A RecurrentPPO run (the ``recurrent`` kind): watch loads it as RecurrentPPO and
+    carries the LSTM state through the episode, so its return is the evaluation's (which
+    plays it with its state) — a policy reset at every step would return another."""
+    pytest.importorskip("sb3_contrib")
+    from fir_gym.training import RunConfig, evaluate, train
+    from fir_gym.video import watch
+
+    config = RunConfig(env_id="fir_gym/CarrierMotion-v0", observation_kind="recurrent",
+                       steps=256, seed=0, n_envs=1, env_kwargs={"max_episode_steps": 30})
+    run = train(config, tmp_path / "recurrent")
+    rec = watch(None, tmp_path / "x.gif", policy=run, seed=3, every=30)
+    reference = evaluate(run, episodes=1, seed=3).returns[0]
+    assert rec.episode_return == pytest.approx(reference, abs=5e-7)   # SB3's Monitor rounds
+
+
 def one_line_error(capsys, argv, *needles):
     assert main(argv) == 2
     captured = capsys.readouterr()
