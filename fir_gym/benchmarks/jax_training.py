@@ -1,6 +1,6 @@
 """Speed of the JAX backend against the numpy one (``fir-gym speed training``).
 
-Two ratios, each of env-steps per second measured in the same run as its reference:
+Three ratios, each of env-steps per second measured in the same run as its reference:
 
 * **PPO**: rejax's PPO on :class:`fir_gym.jax.orbit.Orbit` observing its EKF, the shipped
   recipe (``ppo.yml``: 16 envs × 256 steps, 4 minibatches, 10 epochs, normalisation), the
@@ -8,6 +8,9 @@ Two ratios, each of env-steps per second measured in the same run as its referen
   faster of two runs on fresh keys), against stable-baselines3's PPO on the numpy
   Orbit-v0 with its batched EKF (:func:`fir_gym.training.make_sb3_vec_env`, torch at one
   thread, as ``fir-gym train`` runs it) — target ≥ 6;
+* **recurrent** (no target): the ``recurrent`` kind's training, JAX's RecurrentPPO
+  (:mod:`fir_gym.jax.recurrent_ppo`) against sb3-contrib's, both at ``ppo_lstm.yml`` on the
+  raw measurement of Orbit-v0;
 * **stepping**: the JAX Orbit-v0 + EKF, gymnax's auto-resetting ``step`` vmapped over 2048
   envs and scanned over the steps (a proportional policy on the estimate), against the
   native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
@@ -133,23 +136,25 @@ def numpy_stepping_rate(n_envs: int, steps: int, reps: int, conditions: bool = F
 
 
 def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: bool = False,
-                 n_envs: int | None = None) -> dict[str, Any]:
+                 n_envs: int | None = None, kind: str = KIND) -> dict[str, Any]:
     """``{"steps", "seconds", "compile_seconds", "rate"}`` of JAX PPO (``seeds`` vmapped):
     the training iterations of ``steps`` as one program, the faster of two timed runs;
     ``free``: on :func:`free_env` instead of Orbit-v0 (PPO's own cost); ``n_envs``: the
-    recipe's 16 envs replaced (the rollout grows with it, the minibatch size stays)."""
+    recipe's 16 envs replaced (the rollout grows with it, the minibatch size stays);
+    ``kind``: what the policy observes (``"recurrent"``: RecurrentPPO's recipe and LSTM
+    policy on the measurement)."""
     import jax
 
     from fir_gym.jax import train as jt
 
     if cache:
         jt.enable_compilation_cache(cache)
-    rec = jt.recipe(ENV_ID, steps=steps, n_envs=n_envs)
+    rec = jt.recipe(ENV_ID, steps=steps, n_envs=n_envs, kind=kind)
     if free:
         env = free_env()
         params = env.default_params
     else:
-        env, params = jt.make_env(ENV_ID, KIND)
+        env, params = jt.make_env(ENV_ID, kind)
     algo = jt.make_algorithm(env, params, rec)
 
     def one(ts: Any) -> Any:
@@ -213,24 +218,25 @@ def free_env() -> Any:
     return Free()
 
 
-def sb3_ppo_rate(steps: int) -> dict[str, Any]:
+def sb3_ppo_rate(steps: int, kind: str = KIND) -> dict[str, Any]:
     """``{"steps", "seconds", "setup_seconds", "rate"}`` of stable-baselines3's PPO on the
-    numpy Orbit-v0 with its batched EKF (one warm-up rollout first, not timed)."""
+    numpy Orbit-v0 with its batched EKF (one warm-up rollout first, not timed); ``kind``
+    ``"recurrent"``: sb3-contrib's RecurrentPPO on the measurement, as ``fir-gym train``
+    trains it."""
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from fir_gym.training.run import RunConfig, build_training_env
+    from fir_gym.training.run import RunConfig, algorithm_class, build_training_env
 
     torch.set_num_threads(1)
     start = time.perf_counter()
-    config = RunConfig(ENV_ID, KIND, steps=steps)
+    config = RunConfig(ENV_ID, kind, steps=steps)
     settings = config.settings()
     venv = build_training_env(config, 0, None, settings["n_envs"])
     venv = VecNormalize(venv, gamma=settings["algo_kwargs"].get("gamma", 0.99),
                         **settings["normalize"])
-    model = PPO(settings["policy"], venv, seed=0, device="cpu", verbose=0,
-                **settings["algo_kwargs"])
+    model = algorithm_class(config)(settings["policy"], venv, seed=0, device="cpu",
+                                    verbose=0, **settings["algo_kwargs"])
     rollout = model.n_steps * model.n_envs
     model.learn(rollout)                                  # set-up and one warm-up rollout
     setup = time.perf_counter() - start
@@ -268,7 +274,14 @@ def run(quick: bool = False) -> dict[str, Any]:
     numpy_faulty = numpy_stepping_rate(best_batch, max(5, steps * 256 // best_batch), reps,
                                        conditions=True)
     faulty, _ = jax_stepping_rate(n_envs, steps, reps, conditions=True)
-    return {"ppo": {"sb3_steps_per_s": sb3["rate"], "jax_steps_per_s": jax_ppo["rate"],
+    lstm_steps = 8192 if quick else 32_768
+    sb3_lstm = sb3_ppo_rate(lstm_steps, kind="recurrent")
+    jax_lstm = jax_ppo_rate(lstm_steps, kind="recurrent")
+    return {"recurrent": {"sb3_steps_per_s": sb3_lstm["rate"],
+                          "jax_steps_per_s": jax_lstm["rate"],
+                          "jax_compile_seconds": jax_lstm["compile_seconds"],
+                          "ratio": jax_lstm["rate"] / sb3_lstm["rate"], "steps": lstm_steps},
+            "ppo": {"sb3_steps_per_s": sb3["rate"], "jax_steps_per_s": jax_ppo["rate"],
                     "jax_compile_seconds": jax_ppo["compile_seconds"],
                     "jax_free_steps_per_s": jax_free["rate"],
                     "ratio": jax_ppo["rate"] / sb3["rate"],
@@ -305,7 +318,11 @@ def print_results(res: dict[str, Any]) -> None:
         + ([[f"stepping under mismatch 0.1 + dropout 0.3, JAX {c['jax_envs']} envs / numpy "
              f"{c['numpy_batch']} envs", c["numpy_steps_per_s"], c["jax_steps_per_s"],
              c["ratio"], "—", "the EKF predicting through the lost readings"]]
-           if (c := res.get("stepping_conditions")) else []), floatfmt=".4g"))
+           if (c := res.get("stepping_conditions")) else [])
+        + ([["RecurrentPPO, ppo_lstm.yml, 16 envs (the recurrent kind, on the measurement)",
+             r["sb3_steps_per_s"], r["jax_steps_per_s"], r["ratio"], "—",
+             f"compile {r['jax_compile_seconds']:.1f} s, not counted"]]
+           if (r := res.get("recurrent")) else []), floatfmt=".4g"))
 
 
 def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:

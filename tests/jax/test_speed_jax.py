@@ -21,6 +21,14 @@ def test_the_ppo_rate_runs_with_seeds_vmapped(free: bool) -> None:
     assert res["seconds"] > 0 and res["compile_seconds"] > 0
 
 
+def test_the_recurrent_rates_run() -> None:
+    pytest.importorskip("sb3_contrib")
+    res = jax_training.jax_ppo_rate(512, n_envs=4, kind="recurrent")
+    assert res["steps"] > 0 and math.isfinite(res["rate"]) and res["rate"] > 0
+    sb3 = jax_training.sb3_ppo_rate(64, kind="recurrent")
+    assert sb3["steps"] > 0 and math.isfinite(sb3["rate"]) and sb3["rate"] > 0
+
+
 @pytest.mark.parametrize("mode", jax_training.MODES)
 def test_the_stepping_rate_runs(mode: str) -> None:
     rate, compile_seconds = jax_training.jax_stepping_rate(8, 4, 2, mode=mode)
