@@ -104,12 +104,20 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     ``estimate+covariance`` gives the upper triangle of ``P`` row by row) and the spaces;
     one action in ``[-1, 1]``.
 
-    ``dropout`` (static, a probability; 0 by default) is the sensor's: each reading —
-    the reset's too — is lost with that probability, as under
-    :class:`~fir_gym.wrappers.SensorFaults` ``(dropout=p)`` (:meth:`reading_missing`). A lost
-    reading is *missing*: what is observed holds the last delivered one (before the first,
-    ``H`` times the plant's initial-state mean, the numpy sensor's ``h(initial_state)``), the
-    filters predict only, and ``info["measurement_missing"]`` says so.
+    The sensor's faults (static; none by default) are those of
+    :class:`~fir_gym.wrappers.SensorFaults` the JAX sensor has, checked by its own
+    :func:`~fir_gym.wrappers.faulty_sensor.check_faults` and applied in its order
+    (:meth:`sensor_reading`): ``bias=(k_bias, value)`` adds ``value`` to every reading from
+    step ``k_bias`` on; ``outliers=(p, scale)`` adds ``scale · L z`` (``z ~ N(0, I)``, ``L Lᵀ``
+    the plant's measurement noise covariance: :meth:`measurement_noise_sqrt`) with
+    probability ``p``; ``every=k`` samples only at steps ``0, k, 2k, …``; ``dropout=p`` loses
+    each reading — the reset's too — with probability ``p``. A lost or unsampled reading is
+    *missing*: what is observed holds the last delivered one (before the first, ``H`` times
+    the plant's initial-state mean, the numpy sensor's ``h(initial_state)``), the filters
+    predict only, and ``info["measurement_missing"]`` says so; ``info["sensor_faults"]``
+    flags what acted on the step's reading (``dropped``, ``outlier``, ``biased``,
+    ``unsampled``). A stuck sensor and a delay are not in the JAX sensor (refused by
+    :func:`fir_gym.jax.make`).
 
     ``options`` are the kind's (static): ``horizon``, the window of ``"measurement-stack"``
     and of the windowed filters (it sizes the state; :attr:`default_horizon`, the numpy
@@ -131,11 +139,17 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     randomizable: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, kind: str | None = None, observation: str = "estimate", *,
-                 dropout: float = 0.0, **options: Any) -> None:
+                 dropout: float = 0.0, outliers: Any = None, bias: Any = None, every: Any = 1,
+                 **options: Any) -> None:
+        from fir_gym.wrappers.faulty_sensor import check_faults
+
         super().__init__()
         ok = not isinstance(dropout, bool) and isinstance(dropout, (int, float, np.floating))
         if not ok or not 0.0 <= float(dropout) <= 1.0:
             raise ValueError(f"dropout must be a probability in [0, 1]; got {dropout!r}")
+        #: the sensor's faults (:class:`~fir_gym.wrappers.faulty_sensor.FaultSpec`)
+        self.faults = check_faults(n_y=self.n_y, episode_steps=None, dropout=dropout,
+                                   outliers=outliers, bias=bias, every=every)
         self.dropout = float(dropout)
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
@@ -203,7 +217,48 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     def num_actions(self) -> int:
         return 1
 
-    # ------------------------------------------------------------- the sensor's dropout
+    # ------------------------------------------------------------- the sensor's faults
+    @property
+    def can_miss(self) -> bool:
+        """Whether a reading can be missing (dropout, or a multi-rate sensor)."""
+        return bool(self.dropout or self.faults.every > 1)
+
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """A square root ``L`` (``L Lᵀ = R``, ``(n_y, n_y)``) of the true plant's measurement
+        noise covariance: the outliers' scale (the numpy sensor's ``cholesky(R)``; any root
+        gives the same law)."""
+        raise NotImplementedError(f"{type(self).__name__} has no measurement_noise_sqrt")
+
+    def sensor_reading(self, key: jax.Array, k: Any, params: Any) -> Reading:
+        """What the sensor does to the reading number ``k`` (the reset's is 0) of the reset
+        or step keyed ``key``, in the numpy sensor's order: the bias from its step on, an
+        outlier (one uniform and ``n_y`` normals of the key's fault stream, folded in 1 and
+        2), the multi-rate sampling, the dropout (:meth:`reading_missing`). Every draw comes
+        from ``fold_in(key, FAULT_STREAM)``, so the plant's noise from ``key`` is the same
+        with and without faults; a fault that is off draws nothing."""
+        from fir_gym.wrappers.faulty_sensor import FAULT_STREAM
+
+        f, no = self.faults, jnp.asarray(False)
+        k = jnp.asarray(k)
+        offset = jnp.zeros(self.n_y)
+        biased = outlier = unsampled = no
+        if f.bias_step is not None and f.bias_value is not None:
+            biased = k >= f.bias_step
+            offset = offset + jnp.where(biased, jnp.asarray(f.bias_value, dtype=jnp.float64),
+                                        0.0)
+        if f.outlier_probability:
+            stream = jax.random.fold_in(key, FAULT_STREAM)
+            u = jax.random.uniform(jax.random.fold_in(stream, 1), dtype=jnp.float64)
+            z = jax.random.normal(jax.random.fold_in(stream, 2), (self.n_y,), jnp.float64)
+            outlier = u < f.outlier_probability
+            size = f.outlier_scale * (jnp.asarray(self.measurement_noise_sqrt(params)) @ z)
+            offset = offset + jnp.where(outlier, size, 0.0)
+        if f.every > 1:
+            unsampled = k % f.every != 0
+        dropped = self.reading_missing(key)
+        return Reading(missing=dropped | unsampled, offset=offset, dropped=dropped,
+                       outlier=outlier, biased=biased, unsampled=unsampled)
+
     def reading_missing(self, key: jax.Array) -> jax.Array:
         """Whether the reading of the reset or step keyed ``key`` is lost: one uniform of the
         key's fault stream (``fold_in(key, FAULT_STREAM)``, the numpy sensor's tag, so the
@@ -216,10 +271,16 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         u = jax.random.uniform(jax.random.fold_in(key, FAULT_STREAM), dtype=jnp.float64)
         return u < self.dropout
 
-    def deliver(self, missing: jax.Array | bool, y: jax.Array, held: jax.Array) -> jax.Array:
-        """The reading delivered: ``y``, or ``held`` (the last delivered, or at a reset
+    def deliver(self, missing: Reading | jax.Array | bool, y: jax.Array, held: jax.Array
+                ) -> jax.Array:
+        """The reading delivered: ``y`` (plus the sensor's bias and outlier where
+        ``missing`` is a :class:`Reading`), or ``held`` (the last delivered, or at a reset
         :meth:`first_hold`) where it is missing."""
-        return y if not self.dropout else jnp.where(missing, held, y)
+        if isinstance(missing, Reading):
+            if self.faults.outlier_probability or self.faults.bias_step is not None:
+                y = y + missing.offset
+            missing = missing.missing
+        return y if not self.can_miss else jnp.where(missing, held, y)
 
     def first_hold(self, params: Any) -> jax.Array:
         """What is held before the first reading arrives: ``H`` times the plant's
@@ -227,15 +288,16 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return self.filter_model(params).H @ jnp.asarray(params.initial_state,
                                                           dtype=jnp.float64)
 
-    def own_update(self, missing: jax.Array | bool, before: Any, updated: Any, x_pred: jax.Array,
-                   P_pred: jax.Array, params: Any) -> Any:
+    def own_update(self, missing: Reading | jax.Array | bool, before: Any, updated: Any,
+                   x_pred: jax.Array, P_pred: jax.Array, params: Any) -> Any:
         """The plant's own filter after a step: ``updated`` (the state after the update with
         the delivered reading and its watch), or where the reading is missing the
         prediction ``(x_pred, P_pred)`` alone, watched with no measurement (NaN NIS, the run
         of high NIS ended) — :meth:`fir_gym.estimators.base.Estimator.step` with ``None``.
         ``before``: the state before the update (its filter fields the previous step's)."""
-        if not self.dropout:
+        if not self.can_miss:
             return updated
+        missing = lost(missing)
         predicted = watch_state(before, x_pred, P_pred, jnp.asarray(jnp.nan),
                                 watch_limits_of(params), usable=False)
         return jax.tree.map(lambda a, b: jnp.where(missing, a, b), predicted, updated)
@@ -276,7 +338,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return spaces.Box(-1.0, 1.0, (1,), jnp.float32)
 
     # ------------------------------------------------------------- the kinds' shared steps
-    def finish_reset(self, state: Any, params: Any, missing: jax.Array | bool = False) -> Any:
+    def finish_reset(self, state: Any, params: Any, missing: Reading | jax.Array | bool = False
+                     ) -> Any:
         """A reset's state after the plant's own part: the stack's windows started, or a
         generic filter's first update with ``y[0]`` from its prior (the state's filter
         fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`) — none where the reading
@@ -285,8 +348,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             return state.replace(memory=stack_start(state.y, self.options["horizon"]))
         if self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
+            missing = lost(missing)
             memory = kind.start(state.filter_x, state.filter_P, self.options)
-            extra = {"missing": missing} if self.dropout else {}
+            extra = {"missing": missing} if self.can_miss else {}
             memory, x, P, nis = kind.update(memory, state.filter_x, state.filter_P, state.y,
                                             self.filter_model(params), self.options, **extra)
             state = watch_state(state.replace(memory=memory), x, P, nis,
@@ -294,7 +358,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         return state
 
     def finish_step(self, old: Any, new: Any, u: jax.Array, params: Any,
-                    info: dict[str, Any], missing: jax.Array | bool = False
+                    info: dict[str, Any], missing: Reading | jax.Array | bool = False
                     ) -> tuple[Any, Any, dict[str, Any]]:
         """A step's observation, state and ``info`` after the plant's own part (``new``: the
         plant moved, the reading delivered ``new.y``; the plant's own filter, if that is the
@@ -302,23 +366,51 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         the numpy stack reads what the sensor delivers), or a generic filter's step with the
         applied action ``u`` (a prediction only where the reading is ``missing``) — and for
         every filter kind the ``info`` keys ``estimate``, ``estimation_error``,
-        ``estimator_diverged`` and ``nis``; with dropout, ``measurement_missing``."""
+        ``estimator_diverged`` and ``nis``; where a reading can be missing,
+        ``measurement_missing``; with any fault, ``sensor_faults`` (:class:`Reading`'s flags)."""
+        if isinstance(missing, Reading) and self.faults.active:
+            info["sensor_faults"] = missing.flags()
+        missing = lost(missing)
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
         elif self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
-            extra = {"missing": missing} if self.dropout else {}
+            extra = {"missing": missing} if self.can_miss else {}
             memory, x, P, nis = kind.predict_update(old.memory, old.filter_x, old.filter_P,
                                                     new.y, u, self.filter_model(params),
                                                     self.options, **extra)
             new = watch_state(new.replace(memory=memory), x, P, nis, watch_limits_of(params),
                               kind.reports_nis & ~jnp.asarray(missing))
-        if self.dropout:
+        if self.can_miss:
             info["measurement_missing"] = jnp.asarray(missing)
         if self.kind in self.filter_kinds:
             info.update(estimate=new.filter_x, estimation_error=new.x - new.filter_x,
                         estimator_diverged=new.diverged, nis=new.nis)
         return self.get_obs(new, params), new, info
+
+
+@struct.dataclass
+class Reading:
+    """What the sensor did to one reading (:meth:`FilteredPlant.sensor_reading`): whether it
+    is ``missing`` (``dropped`` or ``unsampled``), the ``offset`` added to the plant's
+    measurement (bias and outlier, ``(n_y,)``), and the faults' flags."""
+
+    missing: jax.Array
+    offset: jax.Array
+    dropped: jax.Array
+    outlier: jax.Array
+    biased: jax.Array
+    unsampled: jax.Array
+
+    def flags(self) -> dict[str, jax.Array]:
+        """The numpy sensor's ``info["sensor_faults"]`` flags the JAX sensor has."""
+        return {"dropped": self.dropped, "outlier": self.outlier, "biased": self.biased,
+                "unsampled": self.unsampled}
+
+
+def lost(missing: Reading | jax.Array | bool) -> jax.Array | bool:
+    """Whether a reading is missing: a :class:`Reading`'s flag, or the flag itself."""
+    return missing.missing if isinstance(missing, Reading) else missing
 
 
 @struct.dataclass

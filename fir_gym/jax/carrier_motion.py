@@ -107,7 +107,14 @@ import numpy as np
 from flax import struct
 
 from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy plants' codes)
-from ._plant import STATE_LIMIT, FilteredPlant, PlantState, filter_prior, watch_state
+from ._plant import (
+    STATE_LIMIT,
+    FilteredPlant,
+    PlantState,
+    Reading,
+    filter_prior,
+    watch_state,
+)
 from ._x64 import require_x64
 from .filter_model import FilterModel
 from .kalman import WatchLimits, kf_predict, kf_update, watch_limits
@@ -391,14 +398,19 @@ class CarrierMotion(FilteredPlant):
         A_d, Q_d = sampled_truth(params.replace(**values))
         return {**values, "A_d": A_d, "process_sqrt": psd_sqrt(Q_d)}
 
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """The true measurement noise's square root (the outliers' scale)."""
+        return jnp.reshape(jnp.asarray(params.measurement_std, dtype=jnp.float64), (1, 1))
+
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: CarrierMotionParams
                   ) -> tuple[Any, CarrierMotionState]:
         return self.reset_with_noise(carrier_motion_reset_noise(key, params), params,
-                                     self.reading_missing(key))
+                                     self.sensor_reading(key, 0, params))
 
     def reset_with_noise(self, noise: CarrierMotionResetNoise, params: CarrierMotionParams,
-                         missing: jax.Array | bool = False) -> tuple[Any, CarrierMotionState]:
+                         missing: Reading | jax.Array | bool = False
+                         ) -> tuple[Any, CarrierMotionState]:
         """The reset with the given noise (:meth:`fir_gym.envs._base.PlantEnv.reset`): ``x =
         initial_state + noise.initial``, ``y = C x + noise.measurement`` (held where
         ``missing``, with dropout); the KF (for ``"kf"``) consumes ``y`` from its prior (an
@@ -421,13 +433,14 @@ class CarrierMotion(FilteredPlant):
                  params: CarrierMotionParams
                  ) -> tuple[Any, CarrierMotionState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, carrier_motion_noise(key, params), params, self.reading_missing(key))
+            state, action, carrier_motion_noise(key, params), params,
+            self.sensor_reading(key, state.time + 1, params))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: CarrierMotionState, action: Any, noise: CarrierMotionNoise,
-                        params: CarrierMotionParams, missing: jax.Array | bool = False
+                        params: CarrierMotionParams, missing: Reading | jax.Array | bool = False
                         ) -> tuple[Any, CarrierMotionState, jax.Array, jax.Array, dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
         with dropout, a ``missing`` reading holds the last delivered one.

@@ -81,6 +81,7 @@ from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
     PlantState,
+    Reading,
     filter_prior,
     numpy_sqrt,
     sqrt_of,
@@ -356,13 +357,17 @@ class Orbit(FilteredPlant):
         return FilterModel(f, f_and_F, jnp.array([[1.0, 0.0]]), jnp.asarray(params.nominal_Q),
                            jnp.reshape(jnp.asarray(params.nominal_R, dtype=jnp.float64), (1, 1)))
 
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """The true measurement noise's square root (the outliers' scale)."""
+        return jnp.sqrt(jnp.reshape(jnp.asarray(params.R, dtype=jnp.float64), (1, 1)))
+
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: OrbitParams) -> tuple[Any, OrbitState]:
         return self.reset_with_noise(orbit_reset_noise(key, params), params,
-                                     self.reading_missing(key))
+                                     self.sensor_reading(key, 0, params))
 
     def reset_with_noise(self, noise: OrbitResetNoise, params: OrbitParams,
-                         missing: jax.Array | bool = False) -> tuple[Any, OrbitState]:
+                         missing: Reading | jax.Array | bool = False) -> tuple[Any, OrbitState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``,
         ``y = r + noise.measurement`` (held where ``missing``, with dropout); the EKF (for
         ``"ekf"``) consumes ``y`` from its prior."""
@@ -382,13 +387,14 @@ class Orbit(FilteredPlant):
     def step_env(self, key: jax.Array, state: OrbitState, action: Any, params: OrbitParams
                  ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, orbit_noise(key, params), params, self.reading_missing(key))
+            state, action, orbit_noise(key, params), params,
+            self.sensor_reading(key, state.time + 1, params))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: OrbitState, action: Any, noise: OrbitNoise,
-                        params: OrbitParams, missing: jax.Array | bool = False
+                        params: OrbitParams, missing: Reading | jax.Array | bool = False
                         ) -> tuple[Any, OrbitState, jax.Array, jax.Array, dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
         with dropout, a ``missing`` reading holds the last delivered one.

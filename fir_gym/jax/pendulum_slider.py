@@ -112,6 +112,7 @@ from ._plant import SIMULATION_FAILURES as SIMULATION_FAILURES  # (the numpy pla
 from ._plant import (
     FilteredPlant,
     PlantState,
+    Reading,
     belief_of,
     filter_prior,
     numpy_sqrt,
@@ -632,14 +633,19 @@ class PendulumSlider(FilteredPlant):
         return FilterModel(f, ekf_model(params), jnp.eye(4), jnp.asarray(params.nominal_Q),
                            jnp.asarray(params.nominal_R))
 
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """The true measurement noise's square root (the outliers' scale)."""
+        return sqrt_of(params.measurement_sqrt, params.R)
+
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: PendulumSliderParams
                   ) -> tuple[Any, PendulumSliderState]:
         return self.reset_with_noise(pendulum_slider_reset_noise(key, params), params,
-                                     self.reading_missing(key))
+                                     self.sensor_reading(key, 0, params))
 
     def reset_with_noise(self, noise: PendulumSliderResetNoise, params: PendulumSliderParams,
-                         missing: jax.Array | bool = False) -> tuple[Any, PendulumSliderState]:
+                         missing: Reading | jax.Array | bool = False
+                         ) -> tuple[Any, PendulumSliderState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``,
         ``y = x + noise.measurement`` (held where ``missing``, with dropout); the EKF (for
         ``"ekf"``) consumes ``y`` from its prior."""
@@ -660,14 +666,14 @@ class PendulumSlider(FilteredPlant):
                  ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
             state, action, pendulum_slider_noise(key, params), params,
-            self.reading_missing(key))
+            self.sensor_reading(key, state.time + 1, params))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: PendulumSliderState, action: Any,
                         noise: PendulumSliderNoise, params: PendulumSliderParams,
-                        missing: jax.Array | bool = False
+                        missing: Reading | jax.Array | bool = False
                         ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array,
                                    dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
@@ -710,7 +716,7 @@ class PendulumSlider(FilteredPlant):
 
     def _finish_step(self, state: PendulumSliderState, u_in: jax.Array, u: jax.Array,
                      x_next: jax.Array, v: jax.Array, prediction: Any,
-                     params: PendulumSliderParams, missing: jax.Array | bool = False
+                     params: PendulumSliderParams, missing: Reading | jax.Array | bool = False
                      ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array, dict[str, Any]]:
         x = state.x
         time = state.time + 1

@@ -50,6 +50,10 @@ def kinds_line() -> str:
     return "; ".join(f"{p.env_id} with kind {', '.join(p.kinds)}" for p in PLANTS.values())
 
 
+#: the sensor faults of :class:`~fir_gym.wrappers.SensorFaults` the JAX sensor has
+JAX_FAULTS = ("dropout", "outliers", "bias", "every")
+
+
 def make(env_id: str, kind: str | None = None, *,
          kind_kwargs: dict[str, Any] | None = None, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, params)`` of ``env_id`` observing ``kind`` (default: the plant's own filter),
@@ -59,8 +63,9 @@ def make(env_id: str, kind: str | None = None, *,
     (the ``mismatch`` condition: the truth's parameters drawn at every reset) wraps the env
     in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` is not supported (the params
     builder refuses it). Of ``sensor_faults`` (``gym.make``'s, the arguments of
-    :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor has ``dropout``
-    (:class:`fir_gym.jax._plant.FilteredPlant`'s ``dropout``); any other fault is refused.
+    :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor has :data:`JAX_FAULTS` —
+    ``dropout``, ``outliers``, ``bias`` and ``every`` (:class:`fir_gym.jax._plant.
+    FilteredPlant`'s sensor); ``stuck`` and ``delay`` are refused.
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
@@ -73,13 +78,18 @@ def make(env_id: str, kind: str | None = None, *,
     if kind not in plant.kinds:
         raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
     randomize = env_kwargs.pop("randomize", None)
-    dropout = _dropout(env_id, env_kwargs.pop("sensor_faults", None))
+    faults = _sensor_faults(env_id, env_kwargs.pop("sensor_faults", None))
     try:
         params = plant.params(**env_kwargs)
     except TypeError as error:                       # an unknown keyword
         raise ValueError(f"{env_id}: {error}") from None
+    if faults:                                       # every/delay against the episode
+        from fir_gym.wrappers.faulty_sensor import check_faults
+
+        check_faults(n_y=plant.env_class.n_y, episode_steps=int(params.max_steps_in_episode),
+                     **faults)
     try:
-        env = plant.env_class(kind, dropout=dropout, **(kind_kwargs or {}))
+        env = plant.env_class(kind, **faults, **(kind_kwargs or {}))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{env_id} kind {kind}: kind_kwargs: {error}") from None
     if randomize:
@@ -89,19 +99,17 @@ def make(env_id: str, kind: str | None = None, *,
     return env, params
 
 
-def _dropout(env_id: str, sensor_faults: Any) -> float:
-    """The dropout probability of ``sensor_faults`` (0 for none); ValueError naming a fault
-    the JAX sensor does not have or a bad value."""
+def _sensor_faults(env_id: str, sensor_faults: Any) -> dict[str, Any]:
+    """The faults of ``sensor_faults`` the JAX sensor has, as its keywords (``{}`` for
+    none); ValueError naming a fault it does not have (the plant's class checks the values)."""
     if not sensor_faults:
-        return 0.0
+        return {}
     if not isinstance(sensor_faults, dict):
         raise ValueError(f"sensor_faults must be a dict of SensorFaults keywords; got "
                          f"{type(sensor_faults).__name__}")
-    other = sorted(set(sensor_faults) - {"dropout"})
+    other = sorted(set(sensor_faults) - set(JAX_FAULTS))
     if other:
-        raise ValueError(f"{env_id}: the JAX sensor has dropout only; sensor_faults names "
-                         f"{other} (the numpy envs have every fault: gym.make(..., "
-                         "sensor_faults=...))")
-    from fir_gym.wrappers.faulty_sensor import check_faults
-
-    return float(check_faults(n_y=1, episode_steps=None, **sensor_faults).dropout)
+        raise ValueError(f"{env_id}: the JAX sensor has {', '.join(JAX_FAULTS)}; "
+                         f"sensor_faults names {other} (the numpy envs have every fault: "
+                         "gym.make(..., sensor_faults=...))")
+    return dict(sensor_faults)

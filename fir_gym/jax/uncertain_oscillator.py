@@ -104,6 +104,7 @@ from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
     PlantState,
+    Reading,
     filter_prior,
     numpy_sqrt,
     sqrt_of,
@@ -415,14 +416,19 @@ class UncertainOscillator(FilteredPlant):
         return FilterModel(f, f_and_F, jnp.asarray(_H), model_process_cov(params),
                            jnp.reshape(jnp.asarray(params.nominal_R, dtype=jnp.float64), (1, 1)))
 
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """The true measurement noise's square root (the outliers' scale)."""
+        return jnp.sqrt(jnp.reshape(jnp.asarray(params.R, dtype=jnp.float64), (1, 1)))
+
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: UncertainOscillatorParams
                   ) -> tuple[Any, UncertainOscillatorState]:
         return self.reset_with_noise(uncertain_oscillator_reset_noise(key, params), params,
-                                     self.reading_missing(key))
+                                     self.sensor_reading(key, 0, params))
 
     def reset_with_noise(self, noise: UncertainOscillatorResetNoise,
-                         params: UncertainOscillatorParams, missing: jax.Array | bool = False
+                         params: UncertainOscillatorParams,
+                         missing: Reading | jax.Array | bool = False
                          ) -> tuple[Any, UncertainOscillatorState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``, ``y = x1 +
         noise.measurement`` (held where ``missing``, with dropout); the EKF (for ``"ekf"``)
@@ -446,14 +452,14 @@ class UncertainOscillator(FilteredPlant):
                  ) -> tuple[Any, UncertainOscillatorState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
             state, action, uncertain_oscillator_noise(key, params), params,
-            self.reading_missing(key))
+            self.sensor_reading(key, state.time + 1, params))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: UncertainOscillatorState, action: Any,
                         noise: UncertainOscillatorNoise, params: UncertainOscillatorParams,
-                        missing: jax.Array | bool = False
+                        missing: Reading | jax.Array | bool = False
                         ) -> tuple[Any, UncertainOscillatorState, jax.Array, jax.Array,
                                    dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``;

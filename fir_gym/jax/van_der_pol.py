@@ -107,6 +107,7 @@ from ._plant import (
     STATE_LIMIT,
     FilteredPlant,
     PlantState,
+    Reading,
     filter_prior,
     numpy_sqrt,
     sqrt_of,
@@ -488,14 +489,18 @@ class VanDerPol(FilteredPlant):
                            jnp.asarray(params.model_Q),
                            jnp.reshape(jnp.asarray(params.model_R, dtype=jnp.float64), (1, 1)))
 
+    def measurement_noise_sqrt(self, params: Any) -> jax.Array:
+        """The true measurement noise's square root (the outliers' scale)."""
+        return jnp.reshape(_measurement_sqrt(params), (1, 1))
+
     # ------------------------------------------------------------------ reset
     def reset_env(self, key: jax.Array, params: VanDerPolParams
                   ) -> tuple[Any, VanDerPolState]:
         return self.reset_with_noise(van_der_pol_reset_noise(key, params), params,
-                                     self.reading_missing(key))
+                                     self.sensor_reading(key, 0, params))
 
     def reset_with_noise(self, noise: VanDerPolResetNoise, params: VanDerPolParams,
-                         missing: jax.Array | bool = False) -> tuple[Any, VanDerPolState]:
+                         missing: Reading | jax.Array | bool = False) -> tuple[Any, VanDerPolState]:
         """The reset with the given noise: ``x = initial_state + noise.initial``, ``y = x1 +
         noise.measurement`` (the degenerate interval; held where ``missing``, with
         dropout); the EKF (for ``"ekf"``) consumes ``y``
@@ -518,13 +523,14 @@ class VanDerPol(FilteredPlant):
                  params: VanDerPolParams
                  ) -> tuple[Any, VanDerPolState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
-            state, action, van_der_pol_noise(key, params), params, self.reading_missing(key))
+            state, action, van_der_pol_noise(key, params), params,
+            self.sensor_reading(key, state.time + 1, params))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info
 
     def step_with_noise(self, state: VanDerPolState, action: Any, noise: VanDerPolNoise,
-                        params: VanDerPolParams, missing: jax.Array | bool = False
+                        params: VanDerPolParams, missing: Reading | jax.Array | bool = False
                         ) -> tuple[Any, VanDerPolState, jax.Array, jax.Array, dict[str, Any]]:
         """One env step with the given noise: ``(obs, state, reward, terminated, info)``;
         with dropout, a ``missing`` reading holds the last delivered one.

@@ -96,13 +96,17 @@ def normwise(got: np.ndarray, want: np.ndarray) -> float:
 
 
 def compare_with_numpy_filter(run: list[Any], numpy_env: Any,
-                              missing: list[bool] | None = None) -> dict[str, float]:
+                              missing: list[bool] | None = None, *,
+                              std_floor: bool = False) -> dict[str, float]:
     """A JAX filter kind's closed-loop run (``[(state, info)]``, the reset's first) against
     the numpy ``EstimatorObservation`` replaying it (``numpy_env``, stepped here with the
     recorded applied actions): the divergence flag asserted equal at every step, the NIS
     NaN in the JAX record wherever the numpy filter has none (or the reading is
     ``missing``); returns the worst estimate and covariance differences relative to their
-    largest entry and the worst NIS difference relative to ``1 + NIS``."""
+    largest entry (the estimate's, with ``std_floor``, relative to the larger of its largest
+    entry and the numpy filter's largest standard deviation ``√max diag P``: an estimate at
+    zero, predicted through missing readings, is round-off of zero in both) and the worst NIS
+    difference relative to ``1 + NIS``."""
     applied = [np.asarray(info["action"]) for _, info in run[1:]]
     estimate, _ = numpy_env.reset()
     worst = {"x": 0.0, "P": 0.0, "nis": 0.0}
@@ -111,7 +115,13 @@ def compare_with_numpy_filter(run: list[Any], numpy_env: Any,
             estimate = numpy_env.step(applied[k - 1])[0]
         est = numpy_env.estimator
         assert bool(state.diverged) == bool(est.diverged), f"step {k}"
-        worst["x"] = max(worst["x"], normwise(np.asarray(state.filter_x), estimate))
+        if std_floor:        # relative to the estimate's size or its own uncertainty
+            scale = max(float(np.max(np.abs(estimate))),
+                        float(np.sqrt(np.max(np.diag(np.asarray(est.P))))), 1e-300)
+            gap = float(np.max(np.abs(np.asarray(state.filter_x) - estimate))) / scale
+            worst["x"] = max(worst["x"], gap)
+        else:
+            worst["x"] = max(worst["x"], normwise(np.asarray(state.filter_x), estimate))
         worst["P"] = max(worst["P"], normwise(np.asarray(state.filter_P), np.asarray(est.P)))
         nis, got = float(est.last_info.get("nis", np.nan)), float(state.nis)
         if np.isnan(nis) or (missing is not None and missing[k]):
