@@ -3,13 +3,13 @@
 The SB3 backend trains the ``recurrent`` kind with sb3-contrib's ``RecurrentPPO``
 (``MlpLstmPolicy``, the recipe of ``fir_gym/training/hyperparams/ppo_lstm.yml``): the raw
 measurements, normalised as ``VecNormalize`` does, through a one-layer LSTM, then SB3's MLP.
-:class:`RecurrentPPO` is :class:`~fir_gym.jax.train.SB3LikePPO` with that policy:
+:class:`RecurrentPPO` is :class:`~fir_gym.jax.ppo.SB3LikePPO` with that policy:
 
 * **the networks** (sb3-contrib's ``RecurrentActorCriticPolicy`` with
   ``enable_critic_lstm=True``, ``shared_lstm=False``, ``n_lstm_layers=1``): the actor is an
   LSTM of ``lstm_hidden_size`` units (:class:`fir_gym.jax.lstm.LSTMCell`, torch's layer)
-  whose output feeds :class:`~fir_gym.jax.train.Policy` (the Gaussian head: MLP, mean,
-  ``log_std``); the critic has its own LSTM feeding :class:`~fir_gym.jax.train.Critic`. The
+  whose output feeds :class:`~fir_gym.jax.ppo.Policy` (the Gaussian head: MLP, mean,
+  ``log_std``); the critic has its own LSTM feeding :class:`~fir_gym.jax.ppo.Critic`. The
   parameters are ``{"lstm": ..., "head": ...}`` per network; the LSTMs' carries of the
   ``num_envs`` training envs ride in the train state (``actor_carry``, ``critic_carry``) from
   rollout to rollout, cleared where an episode starts (``last_done``), as sb3-contrib's
@@ -28,7 +28,7 @@ measurements, normalised as ``VecNormalize`` does, through a one-layer LSTM, the
   parameters): with the shipped recipe (``batch_size`` = ``n_steps`` × envs per minibatch)
   both give minibatches of the same size, and sequences that begin at the rollout's start
   begin from the same state; they differ where sb3-contrib's offset cuts a sequence
-  (:data:`UNMATCHED`). The losses are SB3's (:func:`fir_gym.jax.train.actor_loss`, the
+  (:data:`UNMATCHED`). The losses are SB3's (:func:`fir_gym.jax.ppo.actor_loss`, the
   critic's mean squared error times ``vf_coef``) over all the minibatch's steps.
 
 Tested against sb3-contrib in ``tests/jax/test_recurrent_ppo.py``: the same parameters give
@@ -50,7 +50,7 @@ from flax import struct  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 
 from . import lstm  # noqa: E402
-from .train import SB3LikePPO, actor_loss  # noqa: E402
+from .ppo import SB3LikePPO, actor_loss  # noqa: E402
 
 #: where this training differs from sb3-contrib's RecurrentPPO (besides SB3LikePPO's own)
 UNMATCHED = (
@@ -85,7 +85,7 @@ class SequenceMinibatch(struct.PyTreeNode):
 
 
 class RecurrentPPO(SB3LikePPO):
-    """:class:`~fir_gym.jax.train.SB3LikePPO` with sb3-contrib's LSTM policy (module
+    """:class:`~fir_gym.jax.ppo.SB3LikePPO` with sb3-contrib's LSTM policy (module
     docstring)."""
 
     lstm_hidden_size: int = struct.field(pytree_node=False, default=64)

@@ -10,7 +10,12 @@ from fir_gym.benchmarks.targets import targets
 
 
 def test_the_training_section_reports_both_ratios_and_their_floors(monkeypatch, capsys):
+    from fir_gym.benchmarks import jax_training
+
     monkeypatch.setattr(training, "N_ENVS", 2)                 # a smoke test, not a figure
+    # the JAX backend's rows (with the jax extra) have their own smoke tests
+    # (tests/jax/test_speed_jax.py): here the numpy section's two
+    monkeypatch.setattr(jax_training, "run", lambda quick=False: {"skipped": "not here"})
     res = training.run(quick=True)
     step, train = res["step"], res["train"]
     for value in (step["ratio"], step["ekf16_us"], step["bare16_us"], step["ceiling"],
