@@ -54,14 +54,19 @@ def test_what_the_backend_leaves_out_is_named(tmp_path: Path) -> None:
     assert group_folder(grouped[1]).name == "nominal-ekf-jax"
 
 
-def test_the_records_are_the_saved_policies_played_in_the_numpy_env(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("kind", "recorded"), [("ekf", {"ekf", "ekf+gate"}),
+                                               ("recurrent", {"recurrent"})])
+def test_the_records_are_the_saved_policies_played_in_the_numpy_env(
+        tmp_path: Path, kind: str, recorded: set[str]) -> None:
     """A two-seed group: the benchmark's nominal records equal the run folder's policies
     replayed one episode at a time (``play_in_numpy_env``) — right seed, right policy,
-    right normalisation; a second call reuses every record."""
+    right normalisation, and for ``recurrent`` the LSTM state carried through each episode
+    of the benchmark's vector env as through the single env's; a second call reuses every
+    record."""
     from fir_gym.jax.benchmark import play_in_numpy_env
     from fir_gym.jax.train import load
 
-    group = [_task(tmp_path, "ekf", "nominal", seed) for seed in (0, 1)]
+    group = [_task(tmp_path, kind, "nominal", seed) for seed in (0, 1)]
     results = run_group(group)
     assert [r["backend"] for r in results] == ["jax", "jax"]
     run = load(group_folder(group))
@@ -69,10 +74,10 @@ def test_the_records_are_the_saved_policies_played_in_the_numpy_env(tmp_path: Pa
     replayed = play_in_numpy_env(run, 3, seed=EVAL_SEED)
     for i, result in enumerate(results):
         (nominal,) = [r for r in result["records"]
-                      if r["task"]["condition"] == "nominal" and r["task"]["kind"] == "ekf"]
+                      if r["task"]["condition"] == "nominal" and r["task"]["kind"] == kind]
         assert nominal["task"]["seed"] == i
         np.testing.assert_allclose(nominal["returns"], replayed[i], rtol=1e-9)
-        assert {r["task"]["kind"] for r in result["records"]} == {"ekf", "ekf+gate"}
+        assert {r["task"]["kind"] for r in result["records"]} == recorded
     again = run_group(group)
     assert all(r["reused"] for r in again)
     assert [r["records"] for r in again] == [r["records"] for r in results]

@@ -175,3 +175,20 @@ def test_what_the_jax_sensor_lacks_or_refuses_is_one_line() -> None:
     env, params = make("fir_gym/Orbit-v0")            # no fault: nothing drawn, nothing added
     reading = env.sensor_reading(jax.random.key(0), 4, params)
     assert not bool(reading.missing) and np.all(np.asarray(reading.offset) == 0.0)
+
+
+def test_a_faulty_env_survives_deepcopy_and_pickle() -> None:
+    """The copies deliver the same readings on the same keys (the faults are part of the
+    env, not of a generator it holds)."""
+    import copy
+    import pickle
+
+    env, params = make("fir_gym/UncertainOscillator-v0", "ekf",
+                       sensor_faults=faults("fir_gym/UncertainOscillator-v0"))
+    actions = np.zeros((30, 1))
+    want = [np.asarray(s.y) for _, s, _ in _rollout(env, params, actions, 2)]
+    for other in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
+        assert other.faults.describe() == env.faults.describe()
+        got = [np.asarray(s.y) for _, s, _ in _rollout(other, params, actions, 2)]
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
