@@ -244,10 +244,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --backend jax: an SB3 benchmark's --out folder (or a Markdown "
                         "file of its tables, e.g. README.md), whose rows stand beside the JAX "
                         "rows (default: none)")
+    p.add_argument("--kinds", default=None,
+                   help="with --backend jax: comma-separated subset of the rows' kinds, e.g. "
+                        "recurrent,lqg (default: every kind)")
     _add_runner_options(p, "(plant, kind, seed) jobs",
-                        jax="; jax: the learned kinds the JAX backend has (true, measurement, "
-                            "the plant's filter), all seeds of a plant and kind in one "
-                            'compiled program (the jax extra: pip install ".[jax]")')
+                        jax="; jax: every learned kind (RecurrentPPO for recurrent) and the "
+                            "LQG row, all seeds of a plant and kind in one compiled program "
+                            '(the jax extra: pip install ".[jax]")')
 
     p = command("benchmark-robustness",
                 "which estimator belongs in a closed loop when the model is wrong and the "

@@ -379,6 +379,10 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     if args.compare_with:
         raise ValueError("--compare-with puts an SB3 benchmark beside the jax backend's: give "
                          "it with --backend jax")
+    if args.kinds:
+        raise ValueError("--kinds selects rows of the jax backend's benchmark (--backend jax); "
+                         "the SB3 benchmark runs every kind (compare-controllers --observations "
+                         "trains a subset)")
     from .training.benchmark import print_report, run_benchmark
 
     with _runner(args) as runner:
@@ -391,7 +395,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 
 def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
     """``fir-gym benchmark-controllers --backend jax``: :func:`fir_gym.jax.benchmark.
-    run_benchmark` (the learned kinds the JAX backend has), its tables printed."""
+    run_benchmark` (every learned kind and the LQG row, or ``--kinds``), its tables printed."""
     from ._extras import require
 
     require("jax", "gymnax", "rejax")                  # a missing extra: its one line
@@ -400,8 +404,10 @@ def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
                          "this process: it takes no --jobs or --scheduler")
     from .jax.benchmark import markdown, run_benchmark
 
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()] if args.kinds else None
     report = run_benchmark(args.out, quick=args.quick, seeds=args.seeds, plants=plants,
-                           compare_with=args.compare_with, progress=not args.no_progress)
+                           kinds=kinds, compare_with=args.compare_with,
+                           progress=not args.no_progress)
     print(markdown(report))
     print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
     return 0

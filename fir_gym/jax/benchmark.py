@@ -64,6 +64,10 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     ``kind_kwargs`` (the SB3 benchmark's, e.g. the windowed filters' horizon), ``episodes``.
     Refuses a plant the JAX backend or the benchmark does not have."""
     chosen = chosen_plants(plants)
+    unknown = sorted(set(kinds or ()) - {*JAX_KINDS, "lqg"})
+    if unknown:
+        raise ValueError(f"kinds must be among {', '.join((*JAX_KINDS, 'lqg'))}; got "
+                         f"{', '.join(unknown)}")
     n_seeds = seeds or (QUICK["seeds"] if quick else SEEDS)
     jobs = []
     for env_id in chosen:

@@ -40,6 +40,11 @@ def test_the_plan_is_the_sb3_benchmarks_for_the_plants_and_kinds_jax_has() -> No
         ("ekf", 3, sb3_benchmark.QUICK["steps"])]
     with pytest.raises(ValueError, match="plants must be"):
         benchmark.benchmark_plan(plants=["fir_gym/NoSuchPlant-v0"])
+    only = benchmark.benchmark_plan(seeds=3, kinds=["recurrent"])   # --kinds
+    assert {j["kind"] for j in only} == {"recurrent"}
+    assert {j["env_id"] for j in only} == {j["env_id"] for j in jobs}
+    with pytest.raises(ValueError, match=r"kinds must be among .*; got recurent"):
+        benchmark.benchmark_plan(kinds=["recurent"])
 
 
 def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
