@@ -129,3 +129,40 @@ def compare_with_numpy_filter(run: list[Any], numpy_env: Any,
         else:
             worst["nis"] = max(worst["nis"], abs(got - nis) / (1.0 + abs(nis)))
     return worst
+
+
+def open_loop(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
+    """A JAX env run open loop on ``actions`` from ``jax.random.key(seed)`` (until it
+    terminates): ``[(key, state, info)]``, the reset's first, its info the sensor's reading of
+    the reset (``measurement_missing`` and ``sensor_faults``, as a step's info has them)."""
+    import jax
+    import jax.numpy as jnp
+
+    keys = jax.random.split(jax.random.key(seed), len(actions) + 1)
+    _, state = jax.jit(env.reset_env)(keys[0], params)
+    first = env.sensor_reading(keys[0], 0, params)
+    step = jax.jit(env.step_env)
+    out: list[Any] = [(keys[0], state, {"measurement_missing": first.missing,
+                                        "sensor_faults": first.flags()})]
+    for key, a in zip(keys[1:], actions, strict=True):
+        _, state, _, _, info = step(key, state, jnp.asarray(a), params)
+        out.append((key, state, info))
+        if bool(state.terminated):
+            break
+    return out
+
+
+#: the UKF's options in the plant-level parity tests (tests/jax/test_filter_kinds.py's
+#: docstring says why: at its default alpha the UKF agrees to 1e-8 only)
+TEST_OPTIONS = {"ukf": {"alpha": 1.0, "kappa": 1.0}}
+
+
+def filter_cases() -> list[tuple[str, str]]:
+    """Every (plant, filter kind) pair of :mod:`fir_gym.jax`: the plant's own filter and the
+    generic ones it has."""
+    from fir_gym.jax import PLANTS
+    from fir_gym.jax.filters import GENERIC_FILTERS
+
+    return [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
+            if kind == plant.env_class.estimator or kind in GENERIC_FILTERS]
+

@@ -20,12 +20,16 @@ jax = pytest.importorskip("jax")
 pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-from jax_parity import compare_with_numpy_filter, replay  # noqa: E402
+from jax_parity import (  # noqa: E402
+    TEST_OPTIONS,
+    compare_with_numpy_filter,
+    filter_cases,
+    open_loop,
+    replay,
+)
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
-from fir_gym.jax.filters import GENERIC_FILTERS  # noqa: E402
 from fir_gym.robustness.plan import PLANTS as PLANS  # noqa: E402
 from fir_gym.wrappers.estimator_observation import EstimatorObservation  # noqa: E402
 from fir_gym.wrappers.measurement_stack import MeasurementStack  # noqa: E402
@@ -33,25 +37,12 @@ from fir_gym.wrappers.measurement_stack import MeasurementStack  # noqa: E402
 P_DROP = 0.35
 STEPS = 120
 RTOL = 1e-9
-#: the UKF at the options of tests/jax/test_filter_kinds.py (its docstring says why)
-TEST_OPTIONS = {"ukf": {"alpha": 1.0, "kappa": 1.0}}
-FILTER_CASES = [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
-                if kind == plant.env_class.estimator or kind in GENERIC_FILTERS]
+FILTER_CASES = filter_cases()
 
 
 def _rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
-    """Open loop (the actions given): ``[(state, info)]``, the reset's info ``None``."""
-    keys = jax.random.split(jax.random.key(seed), len(actions) + 1)
-    _, state = jax.jit(env.reset_env)(keys[0], params)
-    missing0 = bool(env.reading_missing(keys[0]))
-    step = jax.jit(env.step_env)
-    out: list[Any] = [(state, {"measurement_missing": missing0})]
-    for key, a in zip(keys[1:], actions, strict=True):
-        _, state, _, _, info = step(key, state, jnp.asarray(a), params)
-        out.append((state, info))
-        if bool(state.terminated):
-            break
-    return out
+    """Open loop (the actions given): ``[(state, info)]``, the reset's first."""
+    return [(state, info) for _, state, info in open_loop(env, params, actions, seed)]
 
 
 def _episode(env_id: str, kind: str, options: dict[str, Any] | None = None) -> Any:

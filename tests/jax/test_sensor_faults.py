@@ -24,11 +24,16 @@ pytest.importorskip("gymnax")
 
 import gymnasium as gym  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from jax_parity import compare_with_numpy_filter, replay  # noqa: E402
+from jax_parity import (  # noqa: E402
+    TEST_OPTIONS,
+    compare_with_numpy_filter,
+    filter_cases,
+    open_loop,
+    replay,
+)
 
 import fir_gym  # noqa: E402, F401  (registers the ids)
 from fir_gym.jax import PLANTS, make  # noqa: E402
-from fir_gym.jax.filters import GENERIC_FILTERS  # noqa: E402
 from fir_gym.robustness.plan import PLANTS as PLANS  # noqa: E402
 from fir_gym.wrappers.estimator_observation import EstimatorObservation  # noqa: E402
 from fir_gym.wrappers.faulty_sensor import FAULT_STREAM  # noqa: E402
@@ -39,10 +44,7 @@ P_OUT, SCALE = 0.2, 6.0
 EVERY = 3
 P_DROP = 0.2
 RTOL = 1e-9
-#: the UKF at the options of tests/jax/test_filter_kinds.py (its docstring says why)
-TEST_OPTIONS = {"ukf": {"alpha": 1.0, "kappa": 1.0}}
-FILTER_CASES = [(env_id, kind) for env_id, plant in PLANTS.items() for kind in plant.kinds
-                if kind == plant.env_class.estimator or kind in GENERIC_FILTERS]
+FILTER_CASES = filter_cases()
 
 
 def faults(env_id: str) -> dict[str, Any]:
@@ -51,29 +53,13 @@ def faults(env_id: str) -> dict[str, Any]:
             "bias": (BIAS_STEP, list(np.linspace(0.5, 1.5, n_y)))}
 
 
-def _rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
-    """Open loop: ``[(key, state, info)]``, the reset's first (its info: the missing flag)."""
-    keys = jax.random.split(jax.random.key(seed), len(actions) + 1)
-    _, state = jax.jit(env.reset_env)(keys[0], params)
-    first = env.sensor_reading(keys[0], 0, params)
-    step = jax.jit(env.step_env)
-    out: list[Any] = [(keys[0], state, {"measurement_missing": first.missing,
-                                        "sensor_faults": first.flags()})]
-    for key, a in zip(keys[1:], actions, strict=True):
-        _, state, _, _, info = step(key, state, jnp.asarray(a), params)
-        out.append((key, state, info))
-        if bool(state.terminated):
-            break
-    return out
-
-
 def _episode(env_id: str, kind: str, options: dict[str, Any] | None = None) -> Any:
     plan = PLANS[env_id]
     env, params = make(env_id, kind, kind_kwargs=options or {},
                        sensor_faults=faults(env_id), **plan.env_kwargs)
     clean_env, _ = make(env_id, kind, kind_kwargs=options or {}, **plan.env_kwargs)
     actions = np.random.default_rng(5).uniform(-1.2, 1.2, (STEPS, 1))
-    return env, params, _rollout(env, params, actions, 7), _rollout(clean_env, params,
+    return env, params, open_loop(env, params, actions, 7), open_loop(clean_env, params,
                                                                       actions, 7)
 
 
@@ -186,9 +172,9 @@ def test_a_faulty_env_survives_deepcopy_and_pickle() -> None:
     env, params = make("fir_gym/UncertainOscillator-v0", "ekf",
                        sensor_faults=faults("fir_gym/UncertainOscillator-v0"))
     actions = np.zeros((30, 1))
-    want = [np.asarray(s.y) for _, s, _ in _rollout(env, params, actions, 2)]
+    want = [np.asarray(s.y) for _, s, _ in open_loop(env, params, actions, 2)]
     for other in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
         assert other.faults.describe() == env.faults.describe()
-        got = [np.asarray(s.y) for _, s, _ in _rollout(other, params, actions, 2)]
+        got = [np.asarray(s.y) for _, s, _ in open_loop(other, params, actions, 2)]
         for a, b in zip(got, want, strict=True):
             np.testing.assert_array_equal(a, b)
