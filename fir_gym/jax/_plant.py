@@ -111,13 +111,16 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     step ``k_bias`` on; ``outliers=(p, scale)`` adds ``scale · L z`` (``z ~ N(0, I)``, ``L Lᵀ``
     the plant's measurement noise covariance: :meth:`measurement_noise_sqrt`) with
     probability ``p``; ``every=k`` samples only at steps ``0, k, 2k, …``; ``dropout=p`` loses
-    each reading — the reset's too — with probability ``p``. A lost or unsampled reading is
-    *missing*: what is observed holds the last delivered one (before the first, ``H`` times
-    the plant's initial-state mean, the numpy sensor's ``h(initial_state)``), the filters
-    predict only, and ``info["measurement_missing"]`` says so; ``info["sensor_faults"]``
-    flags what acted on the step's reading (``dropped``, ``outlier``, ``biased``,
-    ``unsampled``). A stuck sensor and a delay are not in the JAX sensor (refused by
-    :func:`fir_gym.jax.make`).
+    each reading — the reset's too — with probability ``p``; ``stuck=(p, mean_steps)`` (or
+    ``p``) freezes a working sensor with probability ``p`` and lets a frozen one recover with
+    probability ``1 / mean_steps`` (a two-state Markov chain in the state,
+    ``PlantState.sensor_stuck``; a frozen sensor repeats its output exactly, which the receiver
+    detects). A lost, unsampled or stuck reading is *missing*: what is observed holds the last
+    delivered one (before the first, ``H`` times the plant's initial-state mean, the numpy
+    sensor's ``h(initial_state)``), the filters predict only, and
+    ``info["measurement_missing"]`` says so; ``info["sensor_faults"]``
+    flags what acted on the step's reading (``dropped``, ``stuck``, ``outlier``, ``biased``,
+    ``unsampled``). A delay is not in the JAX sensor (refused by :func:`fir_gym.jax.make`).
 
     ``options`` are the kind's (static): ``horizon``, the window of ``"measurement-stack"``
     and of the windowed filters (it sizes the state; :attr:`default_horizon`, the numpy
@@ -140,7 +143,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
     def __init__(self, kind: str | None = None, observation: str = "estimate", *,
                  dropout: float = 0.0, outliers: Any = None, bias: Any = None, every: Any = 1,
-                 **options: Any) -> None:
+                 stuck: Any = None, **options: Any) -> None:
         from fir_gym.wrappers.faulty_sensor import check_faults
 
         super().__init__()
@@ -149,7 +152,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             raise ValueError(f"dropout must be a probability in [0, 1]; got {dropout!r}")
         #: the sensor's faults (:class:`~fir_gym.wrappers.faulty_sensor.FaultSpec`)
         self.faults = check_faults(n_y=self.n_y, episode_steps=None, dropout=dropout,
-                                   outliers=outliers, bias=bias, every=every)
+                                   outliers=outliers, bias=bias, every=every, stuck=stuck)
         self.dropout = float(dropout)
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
@@ -220,8 +223,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     # ------------------------------------------------------------- the sensor's faults
     @property
     def can_miss(self) -> bool:
-        """Whether a reading can be missing (dropout, or a multi-rate sensor)."""
-        return bool(self.dropout or self.faults.every > 1)
+        """Whether a reading can be missing (dropout, a multi-rate or a stuck sensor)."""
+        return bool(self.dropout or self.faults.every > 1 or self.faults.stuck_probability)
 
     def measurement_noise_sqrt(self, params: Any) -> jax.Array:
         """A square root ``L`` (``L Lᵀ = R``, ``(n_y, n_y)``) of the true plant's measurement
@@ -229,19 +232,26 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         gives the same law)."""
         raise NotImplementedError(f"{type(self).__name__} has no measurement_noise_sqrt")
 
-    def sensor_reading(self, key: jax.Array, k: Any, params: Any) -> Reading:
+    def sensor_reading(self, key: jax.Array, k: Any, params: Any,
+                       stuck_before: Any = False) -> Reading:
         """What the sensor does to the reading number ``k`` (the reset's is 0) of the reset
-        or step keyed ``key``, in the numpy sensor's order: the bias from its step on, an
-        outlier (one uniform and ``n_y`` normals of the key's fault stream, folded in 1 and
-        2), the multi-rate sampling, the dropout (:meth:`reading_missing`). Every draw comes
-        from ``fold_in(key, FAULT_STREAM)``, so the plant's noise from ``key`` is the same
-        with and without faults; a fault that is off draws nothing."""
+        or step keyed ``key``, in the numpy sensor's order: the stuck chain's step from
+        ``stuck_before`` (one uniform of the key's fault stream folded in 3), the bias from its
+        step on, an outlier (one uniform and ``n_y`` normals, folded in 1 and 2), the
+        multi-rate sampling, the dropout (:meth:`reading_missing`). Every draw comes from
+        ``fold_in(key, FAULT_STREAM)``, so the plant's noise from ``key`` is the same with and
+        without faults; a fault that is off draws nothing."""
         from fir_gym.wrappers.faulty_sensor import FAULT_STREAM
 
         f, no = self.faults, jnp.asarray(False)
         k = jnp.asarray(k)
         offset = jnp.zeros(self.n_y)
-        biased = outlier = unsampled = no
+        biased = outlier = unsampled = stuck = no
+        if f.stuck_probability:
+            stream = jax.random.fold_in(key, FAULT_STREAM)
+            u = jax.random.uniform(jax.random.fold_in(stream, 3), dtype=jnp.float64)
+            stuck = jnp.where(jnp.asarray(stuck_before), u >= 1.0 / f.stuck_steps,
+                              u < f.stuck_probability)
         if f.bias_step is not None and f.bias_value is not None:
             biased = k >= f.bias_step
             offset = offset + jnp.where(biased, jnp.asarray(f.bias_value, dtype=jnp.float64),
@@ -256,8 +266,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         if f.every > 1:
             unsampled = k % f.every != 0
         dropped = self.reading_missing(key)
-        return Reading(missing=dropped | unsampled, offset=offset, dropped=dropped,
-                       outlier=outlier, biased=biased, unsampled=unsampled)
+        return Reading(missing=dropped | unsampled | stuck, offset=offset, dropped=dropped,
+                       outlier=outlier, biased=biased, unsampled=unsampled, stuck=stuck)
 
     def reading_missing(self, key: jax.Array) -> jax.Array:
         """Whether the reading of the reset or step keyed ``key`` is lost: one uniform of the
@@ -344,6 +354,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         generic filter's first update with ``y[0]`` from its prior (the state's filter
         fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`) — none where the reading
         is ``missing``."""
+        if isinstance(missing, Reading) and self.faults.stuck_probability:
+            state = state.replace(sensor_stuck=missing.stuck)
         if self.kind == "measurement-stack":
             return state.replace(memory=stack_start(state.y, self.options["horizon"]))
         if self.kind in GENERIC_FILTERS:
@@ -370,6 +382,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         ``measurement_missing``; with any fault, ``sensor_faults`` (:class:`Reading`'s flags)."""
         if isinstance(missing, Reading) and self.faults.active:
             info["sensor_faults"] = missing.flags()
+            if self.faults.stuck_probability:
+                new = new.replace(sensor_stuck=missing.stuck)
         missing = lost(missing)
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
@@ -392,8 +406,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 @struct.dataclass
 class Reading:
     """What the sensor did to one reading (:meth:`FilteredPlant.sensor_reading`): whether it
-    is ``missing`` (``dropped`` or ``unsampled``), the ``offset`` added to the plant's
-    measurement (bias and outlier, ``(n_y,)``), and the faults' flags."""
+    is ``missing`` (``dropped``, ``unsampled`` or ``stuck``), the ``offset`` added to the
+    plant's measurement (bias and outlier, ``(n_y,)``), and the faults' flags (``stuck``: the
+    stuck chain's state after this reading)."""
 
     missing: jax.Array
     offset: jax.Array
@@ -401,11 +416,12 @@ class Reading:
     outlier: jax.Array
     biased: jax.Array
     unsampled: jax.Array
+    stuck: jax.Array
 
     def flags(self) -> dict[str, jax.Array]:
         """The numpy sensor's ``info["sensor_faults"]`` flags the JAX sensor has."""
-        return {"dropped": self.dropped, "outlier": self.outlier, "biased": self.biased,
-                "unsampled": self.unsampled}
+        return {"dropped": self.dropped, "stuck": self.stuck, "outlier": self.outlier,
+                "biased": self.biased, "unsampled": self.unsampled}
 
 
 def lost(missing: Reading | jax.Array | bool) -> jax.Array | bool:
@@ -419,7 +435,8 @@ class PlantState(gymnax_env.EnvState):
     measurement ``y`` (a failed step repeats it), ``terminated``, and the filter's record
     (mean, covariance, this step's NIS, the run of high NIS, the sticky ``diverged`` flag;
     :func:`belief_of`) and the kind's ``memory`` (a pytree: the stack's windows, a windowed
-    filter's bank; ``()`` for the others). Each plant subclasses it under its own name."""
+    filter's bank; ``()`` for the others), and the stuck sensor's chain (``sensor_stuck``).
+    Each plant subclasses it under its own name."""
 
     time: Any
     x: Any
@@ -431,6 +448,7 @@ class PlantState(gymnax_env.EnvState):
     nis_run: Any
     diverged: Any
     memory: Any = ()
+    sensor_stuck: Any = False
 
     @classmethod
     def start(cls, x: jax.Array, y: jax.Array, x0: jax.Array, P0: jax.Array) -> Any:
@@ -439,4 +457,4 @@ class PlantState(gymnax_env.EnvState):
         return cls(time=jnp.asarray(0, dtype=jnp.int64), x=x, y=y,
                    terminated=jnp.asarray(False), filter_x=x0, filter_P=P0,
                    nis=jnp.asarray(jnp.nan), nis_run=jnp.asarray(0, dtype=jnp.int64),
-                   diverged=jnp.asarray(False))
+                   diverged=jnp.asarray(False), sensor_stuck=jnp.asarray(False))

@@ -51,7 +51,7 @@ def kinds_line() -> str:
 
 
 #: the sensor faults of :class:`~fir_gym.wrappers.SensorFaults` the JAX sensor has
-JAX_FAULTS = ("dropout", "outliers", "bias", "every")
+JAX_FAULTS = ("dropout", "outliers", "bias", "every", "stuck")
 
 
 def make(env_id: str, kind: str | None = None, *,
@@ -64,8 +64,8 @@ def make(env_id: str, kind: str | None = None, *,
     in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` is not supported (the params
     builder refuses it). Of ``sensor_faults`` (``gym.make``'s, the arguments of
     :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor has :data:`JAX_FAULTS` —
-    ``dropout``, ``outliers``, ``bias`` and ``every`` (:class:`fir_gym.jax._plant.
-    FilteredPlant`'s sensor); ``stuck`` and ``delay`` are refused.
+    ``dropout``, ``outliers``, ``bias``, ``every`` and ``stuck`` (:class:`fir_gym.jax._plant.
+    FilteredPlant`'s sensor); ``delay`` is refused.
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the

@@ -452,7 +452,7 @@ class UncertainOscillator(FilteredPlant):
                  ) -> tuple[Any, UncertainOscillatorState, jax.Array, jax.Array, dict[str, Any]]:
         obs, state, reward, terminated, info = self.step_with_noise(
             state, action, uncertain_oscillator_noise(key, params), params,
-            self.sensor_reading(key, state.time + 1, params))
+            self.sensor_reading(key, state.time + 1, params, state.sensor_stuck))
         # gymnax's rule: transitions are detached unless gradients were asked for
         obs, state = self._apply_transition_gradient_policy(obs, state)
         return obs, state, reward, terminated, info

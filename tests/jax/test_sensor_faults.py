@@ -1,11 +1,12 @@
-"""The JAX sensor's faults beyond dropout: ``outliers``, ``bias`` and ``every``
+"""The JAX sensor's faults beyond dropout: ``outliers``, ``bias``, ``every`` and ``stuck``
 (``fir_gym.jax.make(..., sensor_faults={...})``), all at once with dropout.
 
 Oracles: the same env without faults on the same keys (the plant must move exactly as
 without them: every fault draw comes from the key's fault stream), the numpy sensor's rules
 written out here (:mod:`fir_gym.wrappers.faulty_sensor`: the bias from its step on, an outlier
 of ``scale`` standard deviations — its normals recomputed from the documented stream — the
-multi-rate sensor's samples at ``k = 0, every, 2·every, …``, the hold of a missing reading),
+multi-rate sensor's samples at ``k = 0, every, 2·every, …``, the stuck sensor's two-state
+chain replayed from its uniforms, the hold of a missing reading),
 the outliers' law over many readings, and the numpy env's own
 :class:`~fir_gym.wrappers.EstimatorObservation` replaying the delivered readings with their
 missing flags — every plant's filter kinds fed the biased and contaminated numbers as the
@@ -43,6 +44,7 @@ BIAS_STEP = 40
 P_OUT, SCALE = 0.2, 6.0
 EVERY = 3
 P_DROP = 0.2
+P_STUCK, STUCK_STEPS = 0.1, 3.0
 RTOL = 1e-9
 FILTER_CASES = filter_cases()
 
@@ -50,7 +52,8 @@ FILTER_CASES = filter_cases()
 def faults(env_id: str) -> dict[str, Any]:
     n_y = PLANTS[env_id].env_class.n_y
     return {"dropout": P_DROP, "outliers": (P_OUT, SCALE), "every": EVERY,
-            "bias": (BIAS_STEP, list(np.linspace(0.5, 1.5, n_y)))}
+            "bias": (BIAS_STEP, list(np.linspace(0.5, 1.5, n_y))),
+            "stuck": (P_STUCK, STUCK_STEPS)}
 
 
 def _episode(env_id: str, kind: str, options: dict[str, Any] | None = None) -> Any:
@@ -73,7 +76,7 @@ def test_the_sensor_biases_contaminates_and_samples_as_the_numpy_one(env_id: str
     np.testing.assert_allclose(root @ root.T, np.atleast_2d(_true_measurement_cov(env_id)),
                                rtol=1e-12)
     held = np.asarray(env.first_hold(params))
-    seen_outliers = 0
+    seen_outliers, was_stuck, stuck_steps = 0, False, 0
     for k, ((key, state, info), (_, ref, _)) in enumerate(zip(run, clean, strict=True)):
         np.testing.assert_array_equal(np.asarray(state.x), np.asarray(ref.x))   # untouched
         flags = {name: bool(v) for name, v in info["sensor_faults"].items()}
@@ -83,7 +86,11 @@ def test_the_sensor_biases_contaminates_and_samples_as_the_numpy_one(env_id: str
         assert flags["dropped"] == bool(jax.random.uniform(stream, dtype=jnp.float64) < P_DROP)
         u = jax.random.uniform(jax.random.fold_in(stream, 1), dtype=jnp.float64)
         assert flags["outlier"] == bool(u < P_OUT)
-        missing = flags["dropped"] or flags["unsampled"]
+        u = float(jax.random.uniform(jax.random.fold_in(stream, 3), dtype=jnp.float64))
+        was_stuck = u >= 1.0 / STUCK_STEPS if was_stuck else u < P_STUCK   # the chain
+        assert flags["stuck"] == was_stuck == bool(state.sensor_stuck)
+        stuck_steps += was_stuck
+        missing = flags["dropped"] or flags["unsampled"] or flags["stuck"]
         assert bool(info["measurement_missing"]) == missing
         expected = np.asarray(ref.y) + (bias if flags["biased"] else 0.0)
         if flags["outlier"]:
@@ -94,7 +101,7 @@ def test_the_sensor_biases_contaminates_and_samples_as_the_numpy_one(env_id: str
         if not missing:
             held = expected
         np.testing.assert_allclose(np.asarray(state.y), held, rtol=1e-14, atol=1e-14)
-    assert seen_outliers > 0
+    assert seen_outliers > 0 and 0 < stuck_steps < len(run) // 2
 
 
 def _true_measurement_cov(env_id: str) -> np.ndarray:
@@ -142,16 +149,16 @@ def test_the_filters_read_what_the_faulty_sensor_delivers(env_id: str, kind: str
     worst = compare_with_numpy_filter([(s, i) for _, s, i in run], numpy_env, flags,
                                       std_floor=True)
     print(env_id, kind, f"{sum(flags)} of {len(flags)} missing, {outliers} outliers", worst)
-    assert sum(flags) > len(flags) // 2 and outliers > 0
+    assert len(flags) // 2 < sum(flags) < len(flags) and outliers > 0
     assert max(worst.values()) < RTOL, worst
 
 
 def test_what_the_jax_sensor_lacks_or_refuses_is_one_line() -> None:
-    with pytest.raises(ValueError, match=r"the JAX sensor has dropout, outliers, bias, every; "
-                                         r"sensor_faults names \['delay'\]"):
+    with pytest.raises(ValueError, match=r"the JAX sensor has dropout, outliers, bias, every, "
+                                         r"stuck; sensor_faults names \['delay'\]"):
         make("fir_gym/Orbit-v0", sensor_faults={"dropout": 0.1, "delay": 2})
-    with pytest.raises(ValueError, match=r"names \['stuck'\]"):
-        make("fir_gym/Orbit-v0", sensor_faults={"stuck": 0.1})
+    with pytest.raises(ValueError, match="stuck's mean number of steps must be >= 1"):
+        make("fir_gym/Orbit-v0", sensor_faults={"stuck": (0.1, 0.5)})
     with pytest.raises(ValueError, match="outliers' scale must be a positive"):
         make("fir_gym/Orbit-v0", sensor_faults={"outliers": (0.1, -1.0)})
     with pytest.raises(ValueError, match="every=1000 is not shorter than an episode"):
