@@ -147,13 +147,10 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         from fir_gym.wrappers.faulty_sensor import check_faults
 
         super().__init__()
-        ok = not isinstance(dropout, bool) and isinstance(dropout, (int, float, np.floating))
-        if not ok or not 0.0 <= float(dropout) <= 1.0:
-            raise ValueError(f"dropout must be a probability in [0, 1]; got {dropout!r}")
         #: the sensor's faults (:class:`~fir_gym.wrappers.faulty_sensor.FaultSpec`)
         self.faults = check_faults(n_y=self.n_y, episode_steps=None, dropout=dropout,
                                    outliers=outliers, bias=bias, every=every, stuck=stuck)
-        self.dropout = float(dropout)
+        self.dropout = self.faults.dropout
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
             raise ValueError(f"kind must be one of {self.kinds}; got {kind!r}")
@@ -245,10 +242,10 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
         f, no = self.faults, jnp.asarray(False)
         k = jnp.asarray(k)
+        stream = jax.random.fold_in(key, FAULT_STREAM)
         offset = jnp.zeros(self.n_y)
         biased = outlier = unsampled = stuck = no
         if f.stuck_probability:
-            stream = jax.random.fold_in(key, FAULT_STREAM)
             u = jax.random.uniform(jax.random.fold_in(stream, 3), dtype=jnp.float64)
             stuck = jnp.where(jnp.asarray(stuck_before), u >= 1.0 / f.stuck_steps,
                               u < f.stuck_probability)
@@ -257,7 +254,6 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             offset = offset + jnp.where(biased, jnp.asarray(f.bias_value, dtype=jnp.float64),
                                         0.0)
         if f.outlier_probability:
-            stream = jax.random.fold_in(key, FAULT_STREAM)
             u = jax.random.uniform(jax.random.fold_in(stream, 1), dtype=jnp.float64)
             z = jax.random.normal(jax.random.fold_in(stream, 2), (self.n_y,), jnp.float64)
             outlier = u < f.outlier_probability
@@ -265,7 +261,7 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
             offset = offset + jnp.where(outlier, size, 0.0)
         if f.every > 1:
             unsampled = k % f.every != 0
-        dropped = self.reading_missing(key)
+        dropped = self.reading_dropped(stream)
         return Reading(missing=dropped | unsampled | stuck, offset=offset, dropped=dropped,
                        outlier=outlier, biased=biased, unsampled=unsampled, stuck=stuck)
 
@@ -276,10 +272,13 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         without dropout (no draw)."""
         from fir_gym.wrappers.faulty_sensor import FAULT_STREAM
 
+        return self.reading_dropped(jax.random.fold_in(key, FAULT_STREAM))
+
+    def reading_dropped(self, stream: jax.Array) -> jax.Array:
+        """The dropout's draw on a key's fault stream (:meth:`reading_missing`)."""
         if not self.dropout:
             return jnp.asarray(False)
-        u = jax.random.uniform(jax.random.fold_in(key, FAULT_STREAM), dtype=jnp.float64)
-        return u < self.dropout
+        return jax.random.uniform(stream, dtype=jnp.float64) < self.dropout
 
     def deliver(self, missing: Reading | jax.Array | bool, y: jax.Array, held: jax.Array
                 ) -> jax.Array:

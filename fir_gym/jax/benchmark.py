@@ -40,9 +40,9 @@ from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
 from .registry import PLANTS as JAX_PLANTS
 from .train import SUPPORTED, save, train
 
-#: the benchmark's learned kinds the JAX backend trains (every plant has a subset: its kinds)
-JAX_KINDS = ("true", "measurement", "measurement-stack", "recurrent", "ekf", "kf", "ukf",
-             "efir", "fir", "ufir")
+#: the learned kinds the JAX backend trains, on any plant (each plant has its subset:
+#: :data:`fir_gym.jax.train.SUPPORTED`)
+JAX_KINDS = tuple(dict.fromkeys(kind for kinds in SUPPORTED.values() for kind in kinds))
 
 
 def chosen_plants(plants: list[str] | None = None) -> list[str]:
@@ -73,7 +73,7 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     for env_id in chosen:
         spec = PLANTS[env_id]
         planned = (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators)
-        have = [k for k in planned if k in SUPPORTED[env_id] and k in JAX_KINDS]
+        have = [k for k in planned if k in SUPPORTED[env_id]]
         for kind in have if kinds is None else [k for k in kinds if k in have]:
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],

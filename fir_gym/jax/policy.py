@@ -46,6 +46,8 @@ class JaxPolicy:
         self.actor = jax.tree.map(lambda x: x[index], ts.actor_ts.params)
         self.rms = jax.tree.map(lambda x: x[index], ts.obs_rms_state)
         self._act, self._carry = _acting(result) if acting is None else acting
+        #: whether the policy carries a state from step to step (the ``recurrent`` kind)
+        self.recurrent = self._carry(1) is not None
 
     @classmethod
     def every_seed(cls, result: Any) -> list[JaxPolicy]:
@@ -53,11 +55,6 @@ class JaxPolicy:
         compiled once."""
         acting = _acting(result)
         return [cls(result, i, acting) for i in range(len(result.seeds))]
-
-    @property
-    def recurrent(self) -> bool:
-        """Whether the policy carries a state from step to step (the ``recurrent`` kind)."""
-        return self._carry(1) is not None
 
     def __call__(self, obs: Any, episode_start: Any = None, state: Any = None
                  ) -> tuple[np.ndarray, Any]:
