@@ -122,6 +122,12 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     flags what acted on the step's reading (``dropped``, ``stuck``, ``outlier``, ``biased``,
     ``unsampled``). A delay is not in the JAX sensor (refused by :func:`fir_gym.jax.make`).
 
+    ``burst=((k_first, k_last, δ), ...)`` (static; none by default) is the numpy plants'
+    ``burst`` condition (:mod:`fir_gym.envs._conditions`): the transition ``x[k] → x[k+1]``
+    for ``k_first <= k <= k_last`` is stretched, ``x[k+1] = x[k] + (1 + δ) (x̃[k+1] − x[k])``
+    (:meth:`burst_delta`, :meth:`stretch`; each plant applies it where its numpy plant does),
+    and ``info["burst"]`` is the step's ``δ``.
+
     ``options`` are the kind's (static): ``horizon``, the window of ``"measurement-stack"``
     and of the windowed filters (it sizes the state; :attr:`default_horizon`, the numpy
     plant's, if not given), and a generic filter's options
@@ -143,10 +149,14 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
     def __init__(self, kind: str | None = None, observation: str = "estimate", *,
                  dropout: float = 0.0, outliers: Any = None, bias: Any = None, every: Any = 1,
-                 stuck: Any = None, **options: Any) -> None:
+                 stuck: Any = None, burst: Any = None, **options: Any) -> None:
+        from fir_gym.envs._conditions import check_burst
         from fir_gym.wrappers.faulty_sensor import check_faults
 
         super().__init__()
+        #: the ``burst`` windows ``(k_first, k_last, δ)`` (static; empty: none), checked by
+        #: the numpy plants' :func:`~fir_gym.envs._conditions.check_burst`
+        self.burst = check_burst(burst)
         #: the sensor's faults (:class:`~fir_gym.wrappers.faulty_sensor.FaultSpec`)
         self.faults = check_faults(n_y=self.n_y, episode_steps=None, dropout=dropout,
                                    outliers=outliers, bias=bias, every=every, stuck=stuck)
@@ -216,6 +226,24 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     @property
     def num_actions(self) -> int:
         return 1
+
+    # ------------------------------------------------------------- the burst condition
+    def burst_delta(self, k: Any) -> jax.Array:
+        """The burst's ``δ`` of the transition from ``x[k]``: ``0 + δ_1 [k ∈ w_1] + δ_2 [k ∈
+        w_2] + …`` over :attr:`burst` (overlapping windows add; 0 without a burst) —
+        :func:`fir_gym.envs._conditions.burst_delta`, in its order."""
+        total = jnp.zeros((), dtype=jnp.float64)
+        for first, last, d in self.burst:
+            total = total + d * ((first <= k) & (k <= last))
+        return total
+
+    def stretch(self, x: jax.Array, x_next: jax.Array, delta: jax.Array) -> jax.Array:
+        """The burst's transition: ``x + (1 + δ) (x_next − x)`` where ``δ ≠ 0``, else
+        ``x_next`` untouched (:func:`fir_gym.envs._conditions.stretch`, which the numpy plant
+        applies only when ``δ`` is not 0)."""
+        if not self.burst:
+            return x_next
+        return jnp.where(delta != 0.0, x + (1.0 + delta) * (x_next - x), x_next)
 
     # ------------------------------------------------------------- the sensor's faults
     @property

@@ -211,7 +211,9 @@ def carrier_motion_params(
     stationary covariance (the start's default covariance and the reward's ``σ1``) and takes
     the plant's square roots (:func:`~fir_gym.envs._base.psd_sqrt`). ``nominal`` changes any
     of :data:`MODEL_PARAMETERS` for the filter's model (Δ22 = Δc = 0 by default).
-    ``randomize``, ``burst`` and ``render_mode`` are not supported (a ``TypeError``)."""
+    ``randomize`` and ``burst`` are conditions of :func:`fir_gym.jax.make`, not params
+    (:class:`~fir_gym.jax.randomized.Randomized`, the env's ``burst``); ``render_mode`` is not
+    supported (a ``TypeError``)."""
     require_x64()
     import scipy.linalg
 
@@ -455,7 +457,8 @@ class CarrierMotion(FilteredPlant):
         u_in = jnp.reshape(jnp.asarray(action, dtype=jnp.float64), (1,))
         u = jnp.clip(u_in, -1.0, 1.0)
         x = state.x
-        x_next = x @ jnp.asarray(params.A_d).T + noise.process
+        burst = self.burst_delta(state.time)
+        x_next = self.stretch(x, x @ jnp.asarray(params.A_d).T + noise.process, burst)
         offset = u[0] * params.c_max                       # c_k, held over the interval
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
@@ -479,6 +482,8 @@ class CarrierMotion(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "compensator_offset": offset, "simulation_failure": failure}
+        if self.burst:
+            info["burst"] = burst
         if self.kind == "kf":
             xp, Pp = kf_predict(state.filter_x, state.filter_P, params.nominal_A_d,
                                 params.nominal_Q_d)

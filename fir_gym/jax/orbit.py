@@ -416,7 +416,8 @@ class Orbit(FilteredPlant):
                 params.nominal_euler_dt, params.substeps)
         else:
             x_det = orbit_plant_interval(x, a, params.mu, params.euler_dt, params.substeps)
-        x_next = x_det + noise.process
+        burst = self.burst_delta(state.time)
+        x_next = self.stretch(x, x_det + noise.process, burst)
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
         cost_cap = (params.r_ref - params.r_min) ** 2 + 0.01
@@ -441,6 +442,8 @@ class Orbit(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure}
+        if self.burst:
+            info["burst"] = burst
         if self.kind == "ekf":
             if not fused:
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,

@@ -706,7 +706,9 @@ class PendulumSlider(FilteredPlant):
                                         dict[str, Any]]:
         """:meth:`step_with_noise` with the plant's transition given: ``x_next`` is the new
         state (process noise included) of some plant — the MuJoCo plant's in the parity
-        tests — and the step does the rest as :meth:`PlantEnv.step` does (failure checks,
+        tests; the plant's own transition, which a ``burst`` then stretches, as the numpy
+        plant's ``_transition`` — and the step does the rest as :meth:`PlantEnv.step` does (the
+        burst, failure checks,
         termination, reward, the measurement ``x_next + measurement_noise``, the EKF)."""
         require_x64()
         u_in, u = _action(action)
@@ -719,6 +721,8 @@ class PendulumSlider(FilteredPlant):
                      params: PendulumSliderParams, missing: Reading | jax.Array | bool = False
                      ) -> tuple[Any, PendulumSliderState, jax.Array, jax.Array, dict[str, Any]]:
         x = state.x
+        burst = self.burst_delta(state.time)
+        x_next = self.stretch(x, x_next, burst)
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
         cost_cap = BRACKET_CAP * _reward_scale(params)
@@ -739,6 +743,8 @@ class PendulumSlider(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
+        if self.burst:
+            info["burst"] = burst
         if self.kind == "ekf":
             if prediction is None:
                 xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, params.nominal_Q,

@@ -61,9 +61,11 @@ def make(env_id: str, kind: str | None = None, *,
     ``horizon``: :class:`fir_gym.jax._plant.FilteredPlant`) and the params from the numpy
     env's keywords ``env_kwargs``. Of the numpy plants' condition keywords, ``randomize``
     (the ``mismatch`` condition: the truth's parameters drawn at every reset) wraps the env
-    in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` is not supported (the params
-    builder refuses it). Of ``sensor_faults`` (``gym.make``'s, the arguments of
-    :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor has :data:`JAX_FAULTS` —
+    in :class:`fir_gym.jax.randomized.Randomized`; ``burst`` (the windows ``(k_first,
+    k_last, δ)`` that stretch the dynamics, checked as the numpy plants check them) goes to
+    the environment class (:class:`fir_gym.jax._plant.FilteredPlant`). Of ``sensor_faults``
+    (``gym.make``'s, the arguments of :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor
+    has :data:`JAX_FAULTS` —
     ``dropout``, ``outliers``, ``bias``, ``every`` and ``stuck`` (:class:`fir_gym.jax._plant.
     FilteredPlant`'s sensor); ``delay`` is refused.
 
@@ -71,6 +73,8 @@ def make(env_id: str, kind: str | None = None, *,
         ValueError: an unknown plant or kind (naming what there is), or a keyword the
             plant's builder or the environment class refuses (naming it).
     """
+    from fir_gym.envs._conditions import check_burst
+
     plant = PLANTS.get(env_id)
     if plant is None:
         raise ValueError(f"env_id must be one of {sorted(PLANTS)}; got {env_id!r}")
@@ -78,6 +82,7 @@ def make(env_id: str, kind: str | None = None, *,
     if kind not in plant.kinds:
         raise ValueError(f"kind must be one of {plant.kinds} for {env_id}; got {kind!r}")
     randomize = env_kwargs.pop("randomize", None)
+    burst = check_burst(env_kwargs.pop("burst", None))     # the numpy plants' ValueError
     faults = _sensor_faults(env_id, env_kwargs.pop("sensor_faults", None))
     try:
         params = plant.params(**env_kwargs)
@@ -89,7 +94,7 @@ def make(env_id: str, kind: str | None = None, *,
         check_faults(n_y=plant.env_class.n_y, episode_steps=int(params.max_steps_in_episode),
                      **faults)
     try:
-        env = plant.env_class(kind, **faults, **(kind_kwargs or {}))
+        env = plant.env_class(kind, **faults, burst=burst, **(kind_kwargs or {}))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{env_id} kind {kind}: kind_kwargs: {error}") from None
     if randomize:

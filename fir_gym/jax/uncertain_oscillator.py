@@ -78,9 +78,11 @@ Not bit for bit: XLA's CPU backend contracts ``a * b + c`` into fused multiply-a
 numpy rounds the product first (an ulp per operation, grown to ~1e-12 relative by the
 printed reading's ×1.15-per-step window).
 
-**Not mirrored**: the numpy plant's robustness conditions ``burst=`` (δ windows added to the
-schedule; ``info["burst"]``) and ``randomize=`` (true ``stiffness, damping_gain, drive,
-u_max`` drawn around the nominal ones at each reset, from a generator of its own).
+**Conditions** (through :func:`fir_gym.jax.make`, not the params): ``burst=`` — its windows
+are added to the δ schedule, as the numpy plant adds them (``info["burst"]`` their part,
+``info["delta"]`` the whole δ; :class:`~fir_gym.jax._plant.FilteredPlant`) — and
+``randomize=`` (true ``stiffness, damping_gain, drive, u_max`` drawn around the nominal ones
+at each reset; :class:`fir_gym.jax.randomized.Randomized`).
 
 Everything is a pure function of its arguments: ``jit``-able, ``vmap``-able over keys,
 states and parameters (:class:`UncertainOscillatorParams` is a pytree; ``uncertainty`` is
@@ -475,7 +477,10 @@ class UncertainOscillator(FilteredPlant):
         u_in = jnp.reshape(jnp.asarray(action, dtype=jnp.float64), (1,))
         u = jnp.clip(u_in, -1.0, 1.0)
         x = state.x
+        burst = self.burst_delta(state.time)          # added to the δ schedule (numpy's rule)
         delta = delta_at(state.time, params.delta_first, params.delta_last, params.delta_value)
+        if self.burst:
+            delta = delta + burst
         x_next = oscillator_step(x, u, delta, params.stiffness, params.damping_gain,
                                  params.drive, params.u_max, params.dt, params.uncertainty)
         x_next = x_next.at[1].add(noise.process)
@@ -501,6 +506,8 @@ class UncertainOscillator(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure, "delta": delta}
+        if self.burst:
+            info["burst"] = burst
         if self.kind == "ekf":
             model = self.filter_model(params)
             xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model.Q, model.f_and_F)

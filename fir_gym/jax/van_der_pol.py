@@ -80,8 +80,10 @@ loop differs from the numpy one (and its numba twin) by round-off from the first
 the Van der Pol origin being unstable, that round-off grows in open loop (like ``e^{ε t/2}``),
 which is why the parity episodes run under a feedback both envs evaluate.
 
-Not mirrored: the numpy env's ``randomize=`` and ``burst=`` (vmap over :class:`VanDerPolParams`'
-``epsilon`` / ``u_max`` instead) and ``render``.
+Conditions (through :func:`fir_gym.jax.make`, not the params): ``burst=`` stretches the whole
+path of a step about its start, its end and the interval average alike, as the numpy plant
+does (:class:`~fir_gym.jax._plant.FilteredPlant`), and ``randomize=``
+(:class:`fir_gym.jax.randomized.Randomized`). Not mirrored: ``render``.
 
 Everything is a pure function of its arguments: ``jit``-able, ``vmap``-able over keys,
 states and parameters (:class:`VanDerPolParams` is a pytree; ``substeps`` and
@@ -555,6 +557,11 @@ class VanDerPol(FilteredPlant):
         else:
             x_next, x1_average = heun_plant_interval(x, force, noise.process, params.epsilon,
                                                      tau, params.substeps)
+        burst = self.burst_delta(state.time)
+        if self.burst:       # the whole path stretched about its start: its end and average
+            x_next = self.stretch(x, x_next, burst)
+            x1_average = jnp.where(burst != 0.0, x[0] + (1.0 + burst) * (x1_average - x[0]),
+                                   x1_average)
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
         cost_cap = params.state_bound ** 2 / 2.0 + 0.01
@@ -577,6 +584,8 @@ class VanDerPol(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure, "x1_average": x1_average}
+        if self.burst:
+            info["burst"] = burst
         if self.kind == "ekf":
             if fused:
                 Pp = ekf_predict(state.filter_x, state.filter_P, u, params.model_Q,
