@@ -13,8 +13,8 @@ from gymnax.environments import spaces
 
 from ._x64 import require_x64
 from .filter_model import FilterModel
-from .filters import GENERIC_FILTERS
-from .kalman import Belief, WatchLimits, watch
+from .filters import GENERIC_FILTERS, FilterKind
+from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
 from .measurement_stack import stack_observation, stack_push, stack_start
 
 #: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`; PendulumSlider-v0
@@ -120,7 +120,13 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     sensor's ``h(initial_state)``), the filters predict only, and
     ``info["measurement_missing"]`` says so; ``info["sensor_faults"]``
     flags what acted on the step's reading (``dropped``, ``stuck``, ``outlier``, ``biased``,
-    ``unsampled``). A delay is not in the JAX sensor (refused by :func:`fir_gym.jax.make`).
+    ``unsampled``). ``delay=d`` puts the readings, their flags along, on a transmission line
+    (a ring of ``d + 1`` slots in the state, ``PlantState.sensor_line``; :meth:`transmit`):
+    reading ``k − d`` is delivered at ``k``, nothing before ``k = d`` (``late``, missing), and
+    the flags are those of the reading delivered (``late`` added). Every filter kind is told
+    the delay (:meth:`lagged_step`): it runs ``d`` steps behind and its estimate is predicted
+    ahead — the plant's own filter then runs there, not in the plant's step
+    (:attr:`runs_own_filter`).
 
     ``burst=((k_first, k_last, δ), ...)`` (static; none by default) is the numpy plants'
     ``burst`` condition (:mod:`fir_gym.envs._conditions`): the transition ``x[k] → x[k+1]``
@@ -134,8 +140,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     (:attr:`fir_gym.jax.filters.FilterKind.options`). A subclass sets :attr:`kinds`,
     :attr:`estimator`, :attr:`n_x`, :attr:`n_y` (and :attr:`default_horizon`), implements
     :meth:`filter_model`, and ends its reset with :meth:`finish_reset` and its step with
-    :meth:`finish_step`; its state has ``x``, ``y``, ``terminated``, the filter fields and
-    ``memory``.
+    :meth:`finish_step`, runs its own filter where :attr:`runs_own_filter`; its state has
+    ``x``, ``y``, ``terminated``, the filter fields and ``memory``.
     """
 
     kinds: ClassVar[tuple[str, ...]]
@@ -149,7 +155,8 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
 
     def __init__(self, kind: str | None = None, observation: str = "estimate", *,
                  dropout: float = 0.0, outliers: Any = None, bias: Any = None, every: Any = 1,
-                 stuck: Any = None, burst: Any = None, **options: Any) -> None:
+                 stuck: Any = None, delay: Any = 0, burst: Any = None, **options: Any
+                 ) -> None:
         from fir_gym.envs._conditions import check_burst
         from fir_gym.wrappers.faulty_sensor import check_faults
 
@@ -159,8 +166,11 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         self.burst = check_burst(burst)
         #: the sensor's faults (:class:`~fir_gym.wrappers.faulty_sensor.FaultSpec`)
         self.faults = check_faults(n_y=self.n_y, episode_steps=None, dropout=dropout,
-                                   outliers=outliers, bias=bias, every=every, stuck=stuck)
+                                   outliers=outliers, bias=bias, every=every, stuck=stuck,
+                                   delay=delay)
         self.dropout = self.faults.dropout
+        #: the sensor's delay in steps (0: none), told to every filter kind
+        self.delay = self.faults.delay
         kind = self.estimator if kind is None else kind
         if kind not in self.kinds:
             raise ValueError(f"kind must be one of {self.kinds}; got {kind!r}")
@@ -198,6 +208,13 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     def filter_kinds(self) -> tuple[str, ...]:
         """The kinds of :attr:`kinds` that run a filter (the plant's own and the generic)."""
         return tuple(k for k in self.kinds if k == self.estimator or k in GENERIC_FILTERS)
+
+    @property
+    def runs_own_filter(self) -> bool:
+        """Whether the plant runs its own filter inside its step: the kind is the plant's
+        own filter and the sensor has no delay (with a delay every filter kind runs behind,
+        in :meth:`finish_step`, :meth:`lagged_step`)."""
+        return self.kind == self.estimator and not self.delay
 
     def filter_model(self, params: Any) -> FilterModel:
         """What the filters believe (the numpy plant's ``model``) under ``params``."""
@@ -248,8 +265,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
     # ------------------------------------------------------------- the sensor's faults
     @property
     def can_miss(self) -> bool:
-        """Whether a reading can be missing (dropout, a multi-rate or a stuck sensor)."""
-        return bool(self.dropout or self.faults.every > 1 or self.faults.stuck_probability)
+        """Whether a reading can be missing (dropout, a multi-rate, stuck or late sensor)."""
+        return bool(self.dropout or self.faults.every > 1 or self.faults.stuck_probability
+                    or self.delay)
 
     def measurement_noise_sqrt(self, params: Any) -> jax.Array:
         """A square root ``L`` (``L Lᵀ = R``, ``(n_y, n_y)``) of the true plant's measurement
@@ -339,6 +357,75 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
                                 watch_limits_of(params), usable=False)
         return jax.tree.map(lambda a, b: jnp.where(missing, a, b), predicted, updated)
 
+    # ------------------------------------------------------------- the sensor's delay
+    def transmit(self, line: SensorLine, k: Any, reading: jax.Array, flags: jax.Array,
+                 held: jax.Array) -> tuple[SensorLine, jax.Array, jax.Array,
+                                           dict[str, jax.Array]]:
+        """The delayed sensor's transmission line (:class:`~fir_gym.wrappers.faulty_sensor.
+        FaultySensor`'s): reading number ``k`` and its ``flags`` (:func:`line_flags`) go into
+        slot ``k mod (delay + 1)`` of the ring, and out comes reading ``k − delay`` from its
+        slot — ``late`` for ``k < delay`` (nothing due yet). Returns the line, the reading
+        delivered (``held`` where it is missing: late, or dropped, stuck or unsampled when it
+        was read), whether it is missing, and its flags (``late`` added), the numpy
+        sensor's ``info["sensor_faults"]``."""
+        ring = self.delay + 1
+        slot = k % ring
+        line = SensorLine(line.values.at[slot].set(reading), line.flags.at[slot].set(flags))
+        due = k - self.delay
+        late = due < 0
+        out = jnp.where(late, 0, due % ring)
+        got = jnp.where(late, False, line.flags[out])
+        named = dict(zip(LINE_FLAGS, got, strict=True))
+        missing = late | named["dropped"] | named["stuck"] | named["unsampled"]
+        return line, jnp.where(missing, held, line.values[out]), missing, {**named, "late": late}
+
+    @property
+    def lagged_kind(self) -> FilterKind:
+        """The filter kind run behind a delayed sensor: a generic one, or for the plant's own
+        filter the textbook EKF (a KF on a linear model) on :meth:`filter_model`
+        (:data:`OWN_FILTER`) — the plant's own step, which it reproduces to round-off
+        (tests/jax/test_kinds.py), cannot lag."""
+        return GENERIC_FILTERS.get(self.kind, OWN_FILTER)
+
+    def lagged_step(self, old: Any, new: Any, u: jax.Array, missing: Any, params: Any) -> Any:
+        """A filter kind's step behind a sensor delayed ``d`` steps
+        (:mod:`fir_gym.estimators.delay`, as ``gym.make(id, sensor_faults={"delay": d},
+        estimator=kind)`` tells it the delay): the inputs kept (``Lagged.inputs``, the last
+        ``d + 1``, oldest first) take the applied ``u[k − 1]``; at ``k = d`` the lagged filter
+        consumes the delivered ``y[0]`` from its prior (an update only), after it ``y[k − d]``
+        with ``u[k − d − 1]``, a prediction only where it is missing; its watch as always. Its
+        estimate is then predicted ``min(k, d)`` steps ahead with the last inputs (the EKF's
+        prediction on :meth:`filter_model`, :func:`fir_gym.estimators.delay.predict_ahead`):
+        the state's ``filter_x``, ``filter_P`` — what is observed —, a non-finite prediction
+        raising ``diverged`` and keeping the last finite one."""
+        d, kind, options = self.delay, self.lagged_kind, self.options
+        model, limits = self.filter_model(params), watch_limits_of(params)
+        k = new.time
+        lag = old.delayed
+        inputs = jnp.concatenate([lag.inputs[1:], jnp.reshape(u, (1, -1))])
+        x0, P0 = filter_prior(params)
+        first = kind.update(kind.start(x0, P0, options), x0, P0, new.y, model, options,
+                            missing=missing)
+        later = kind.predict_update(old.memory, lag.x, lag.P, new.y, inputs[0], model,
+                                    options, missing=missing)
+        memory, x, P, nis = jax.tree.map(lambda a, b: jnp.where(k == d, a, b), first, later)
+        before = Belief(lag.x, lag.P, old.nis, old.nis_run, old.diverged)
+        stepped = watch(before, x, P, nis, limits, kind.reports_nis & ~jnp.asarray(missing))
+        due = k >= d
+        b = jax.tree.map(lambda a, c: jnp.where(due, a, c), stepped, before)
+        memory = jax.tree.map(lambda a, c: jnp.where(due, a, c), memory, old.memory)
+        steps = jnp.minimum(k, d)
+        x_ahead, P_ahead = b.x, b.P
+        for slot in range(1, d + 1):
+            xn, Pn = ekf_predict(x_ahead, P_ahead, inputs[slot], model.Q, model.f_and_F)
+            active = steps >= d + 1 - slot
+            x_ahead, P_ahead = jnp.where(active, xn, x_ahead), jnp.where(active, Pn, P_ahead)
+        finite = jnp.all(jnp.isfinite(x_ahead)) & jnp.all(jnp.isfinite(P_ahead))
+        return new.replace(memory=memory, delayed=Lagged(b.x, b.P, inputs),
+                           filter_x=jnp.where(finite, x_ahead, old.filter_x),
+                           filter_P=jnp.where(finite, P_ahead, old.filter_P),
+                           nis=b.nis, nis_run=b.nis_run, diverged=b.diverged | ~finite)
+
     def get_obs(self, state: Any, params: Any = None, key: jax.Array | None = None) -> Any:
         if self.kind == "true":
             return state.x
@@ -380,11 +467,27 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         """A reset's state after the plant's own part: the stack's windows started, or a
         generic filter's first update with ``y[0]`` from its prior (the state's filter
         fields; :meth:`fir_gym.wrappers.EstimatorObservation.reset`) — none where the reading
-        is ``missing``."""
+        is ``missing``. With a delay the reading enters the sensor's line (the one delivered,
+        late, is the held :meth:`first_hold`) and a filter kind starts behind it, at its prior
+        (:meth:`lagged_step`)."""
         if isinstance(missing, Reading) and self.faults.stuck_probability:
             state = state.replace(sensor_stuck=missing.stuck)
+        if self.delay:               # the reading enters the line; nothing has arrived yet
+            d, n_y = self.delay, self.n_y
+            line = SensorLine(jnp.zeros((d + 1, n_y)), jnp.zeros((d + 1, len(LINE_FLAGS)),
+                                                                 dtype=bool))
+            line, y, missing, _ = self.transmit(line, jnp.asarray(0), state.y,
+                                                line_flags(missing), self.first_hold(params))
+            state = state.replace(y=y, sensor_line=line)
         if self.kind == "measurement-stack":
             return state.replace(memory=stack_start(state.y, self.options["horizon"]))
+        if self.delay and self.kind in self.filter_kinds:
+            # the filter runs d steps behind: it has not started (its prior of x[0] held),
+            # and its estimate of x[0] is that prior (no input to predict with yet)
+            kind = self.lagged_kind
+            memory = kind.start(state.filter_x, state.filter_P, self.options)
+            return state.replace(memory=memory, delayed=Lagged(
+                state.filter_x, state.filter_P, jnp.zeros((self.delay + 1, self.num_actions))))
         if self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
             missing = lost(missing)
@@ -406,14 +509,23 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         applied action ``u`` (a prediction only where the reading is ``missing``) — and for
         every filter kind the ``info`` keys ``estimate``, ``estimation_error``,
         ``estimator_diverged`` and ``nis``; where a reading can be missing,
-        ``measurement_missing``; with any fault, ``sensor_faults`` (:class:`Reading`'s flags)."""
+        ``measurement_missing``; with any fault, ``sensor_faults`` (:class:`Reading`'s flags).
+        With a delay, ``new.y`` (the sensor's reading of the step) enters the line and the
+        reading due is delivered (:meth:`transmit`; its flags, ``late`` added, are
+        ``sensor_faults``), and a filter kind runs behind it (:meth:`lagged_step`)."""
         if isinstance(missing, Reading) and self.faults.active:
             info["sensor_faults"] = missing.flags()
             if self.faults.stuck_probability:
                 new = new.replace(sensor_stuck=missing.stuck)
+        if self.delay:               # the step's reading enters the line, y[k − d] leaves it
+            line, y, missing, info["sensor_faults"] = self.transmit(
+                old.sensor_line, new.time, new.y, line_flags(missing), old.y)
+            new = new.replace(y=y, sensor_line=line)
         missing = lost(missing)
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
+        elif self.delay and self.kind in self.filter_kinds:
+            new = self.lagged_step(old, new, u, missing, params)
         elif self.kind in GENERIC_FILTERS:
             kind = GENERIC_FILTERS[self.kind]
             extra = {"missing": missing} if self.can_miss else {}
@@ -451,6 +563,65 @@ class Reading:
                 "biased": self.biased, "unsampled": self.unsampled}
 
 
+#: the flags a reading carries along a delayed sensor's line (:class:`SensorLine`), the numpy
+#: sensor's names
+LINE_FLAGS = ("dropped", "stuck", "outlier", "biased", "unsampled")
+
+
+def line_flags(missing: Reading | jax.Array | bool) -> jax.Array:
+    """A reading's :data:`LINE_FLAGS` as one bool vector (a bare ``missing`` flag: dropped)."""
+    if isinstance(missing, Reading):
+        return jnp.stack([jnp.asarray(missing.dropped), jnp.asarray(missing.stuck),
+                          jnp.asarray(missing.outlier), jnp.asarray(missing.biased),
+                          jnp.asarray(missing.unsampled)])
+    no = jnp.asarray(False)
+    return jnp.stack([jnp.asarray(missing, dtype=bool), no, no, no, no])
+
+
+@struct.dataclass
+class SensorLine:
+    """A delayed sensor's transmission line (:meth:`FilteredPlant.transmit`): a ring of
+    ``delay + 1`` slots, each a reading ``values[i]`` (``n_y``) and its :data:`LINE_FLAGS`."""
+
+    values: Any
+    flags: Any
+
+
+@struct.dataclass
+class Lagged:
+    """A filter kind behind a delayed sensor (:meth:`FilteredPlant.lagged_step`): its lagged
+    mean and covariance (of ``x[k − d]``; its NIS, run and flag are the state's) and the last
+    ``d + 1`` applied inputs, oldest first."""
+
+    x: Any
+    P: Any
+    inputs: Any
+
+
+def _own_update(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, model: FilterModel,
+                options: Any, missing: jax.Array | bool = False) -> Any:
+    """The textbook EKF's (a KF's) update on ``model``: the prior kept and a NaN NIS where
+    the reading is ``missing``."""
+    xu, Pu, nis = kf_update_innovation(x, P, y - model.H @ x, model.H, model.R)
+    missing = jnp.asarray(missing)
+    return (memory, jnp.where(missing, x, xu), jnp.where(missing, P, Pu),
+            jnp.where(missing, jnp.nan, nis))
+
+
+def _own_step(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, u: jax.Array,
+              model: FilterModel, options: Any, missing: jax.Array | bool = False) -> Any:
+    """The textbook EKF's step on ``model``: ``x⁻ = f(x, u)``, ``P⁻ = F P Fᵀ + Q``, then
+    :func:`_own_update`."""
+    xp, Pp = ekf_predict(x, P, u, model.Q, model.f_and_F)
+    return _own_update(memory, xp, Pp, y, model, options, missing)
+
+
+#: a plant's own filter as a filter kind (the textbook EKF on its ``filter_model``): what runs
+#: behind a delayed sensor (:attr:`FilteredPlant.lagged_kind`)
+OWN_FILTER = FilterKind(options={}, start=lambda x0, P0, options: (), update=_own_update,
+                        predict_update=_own_step)
+
+
 def lost(missing: Reading | jax.Array | bool) -> jax.Array | bool:
     """Whether a reading is missing: a :class:`Reading`'s flag, or the flag itself."""
     return missing.missing if isinstance(missing, Reading) else missing
@@ -476,6 +647,10 @@ class PlantState(gymnax_env.EnvState):
     diverged: Any
     memory: Any = ()
     sensor_stuck: Any = False
+    #: with a delay: the sensor's line (:class:`SensorLine`) and, for a filter kind, the
+    #: lagged filter (:class:`Lagged`)
+    sensor_line: Any = ()
+    delayed: Any = ()
 
     @classmethod
     def start(cls, x: jax.Array, y: jax.Array, x0: jax.Array, P0: jax.Array) -> Any:

@@ -423,7 +423,7 @@ class CarrierMotion(FilteredPlant):
                          self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = CarrierMotionState.start(x, y, x0, P0)
-        if self.kind == "kf":
+        if self.runs_own_filter:
             updated = watch_state(state, *kf_update(x0, P0, y, params.nominal_C,
                                                     params.nominal_R), params.watch)
             state = self.own_update(missing, state, updated, x0, P0, params)
@@ -484,7 +484,7 @@ class CarrierMotion(FilteredPlant):
                                 "compensator_offset": offset, "simulation_failure": failure}
         if self.burst:
             info["burst"] = burst
-        if self.kind == "kf":
+        if self.runs_own_filter:
             xp, Pp = kf_predict(state.filter_x, state.filter_P, params.nominal_A_d,
                                 params.nominal_Q_d)
             updated = watch_state(new, *kf_update(xp, Pp, y, params.nominal_C,

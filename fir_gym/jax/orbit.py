@@ -376,7 +376,7 @@ class Orbit(FilteredPlant):
         y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = OrbitState.start(x, y, x0, P0)
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             updated = watch_state(state, *ekf_update(x0, P0, y, params.nominal_R),
                                   watch_limits_of(params))
             state = self.own_update(missing, state, updated, x0, P0, params)
@@ -409,7 +409,7 @@ class Orbit(FilteredPlant):
         u = jnp.clip(u_in, -1.0, 1.0)
         x = state.x
         a, a_model = u[0] * params.thrust_max, u[0] * params.nominal_thrust_max
-        fused = self.kind == "ekf" and params.substeps == params.nominal_substeps
+        fused = self.runs_own_filter and params.substeps == params.nominal_substeps
         if fused:            # the plant's and the model's Euler loops as one (same numbers)
             x_det, xp, F = orbit_plant_and_model_intervals(
                 x, a, params.mu, params.euler_dt, state.filter_x, a_model, params.nominal_mu,
@@ -444,7 +444,7 @@ class Orbit(FilteredPlant):
                                 "simulation_failure": failure}
         if self.burst:
             info["burst"] = burst
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             if not fused:
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,
                                        params.nominal_euler_dt, params.nominal_substeps)

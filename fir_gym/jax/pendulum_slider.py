@@ -654,7 +654,7 @@ class PendulumSlider(FilteredPlant):
         y = self.deliver(missing, x + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = PendulumSliderState.start(x, y, x0, P0)
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             updated = with_belief(state, ekf_correct(belief_of(state), x0, P0, y, params))
             state = self.own_update(missing, state, updated, x0, P0, params)
         state = self.finish_reset(state, params, missing)
@@ -689,7 +689,7 @@ class PendulumSlider(FilteredPlant):
         p = _physics(params, nominal=False)
         U = u[0] * params.force_max
         prediction = None
-        if self.kind == "ekf" and params.frame_skip == params.nominal_frame_skip:
+        if self.runs_own_filter and params.frame_skip == params.nominal_frame_skip:
             # the plant's and the model's RK4 loops as one (same numbers)
             x_det, xp, F = slider_plant_and_model_intervals(
                 state.x, U, p, params.friction, state.filter_x, u[0] * params.nominal_force_max,
@@ -745,7 +745,7 @@ class PendulumSlider(FilteredPlant):
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
         if self.burst:
             info["burst"] = burst
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             if prediction is None:
                 xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, params.nominal_Q,
                                      ekf_model(params))

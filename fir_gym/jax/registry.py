@@ -51,7 +51,7 @@ def kinds_line() -> str:
 
 
 #: the sensor faults of :class:`~fir_gym.wrappers.SensorFaults` the JAX sensor has
-JAX_FAULTS = ("dropout", "outliers", "bias", "every", "stuck")
+JAX_FAULTS = ("dropout", "outliers", "bias", "every", "stuck", "delay")
 
 
 def make(env_id: str, kind: str | None = None, *,
@@ -65,9 +65,11 @@ def make(env_id: str, kind: str | None = None, *,
     k_last, δ)`` that stretch the dynamics, checked as the numpy plants check them) goes to
     the environment class (:class:`fir_gym.jax._plant.FilteredPlant`). Of ``sensor_faults``
     (``gym.make``'s, the arguments of :class:`~fir_gym.wrappers.SensorFaults`) the JAX sensor
-    has :data:`JAX_FAULTS` —
-    ``dropout``, ``outliers``, ``bias``, ``every`` and ``stuck`` (:class:`fir_gym.jax._plant.
-    FilteredPlant`'s sensor); ``delay`` is refused.
+    has every one, :data:`JAX_FAULTS` —
+    ``dropout``, ``outliers``, ``bias``, ``every``, ``stuck`` and ``delay`` (:class:`fir_gym.
+    jax._plant.FilteredPlant`'s sensor); a filter kind is told the delay, as ``gym.make(id,
+    sensor_faults=..., estimator=...)`` tells the numpy estimator
+    (:meth:`~fir_gym.jax._plant.FilteredPlant.lagged_step`).
 
     Raises:
         ValueError: an unknown plant or kind (naming what there is), or a keyword the

@@ -442,7 +442,7 @@ class UncertainOscillator(FilteredPlant):
         y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = UncertainOscillatorState.start(x, y, x0, P0)
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             state = self.own_update(missing, state, ekf_update(state, x0, P0, y, params), x0,
                                     P0, params)
         state = self.finish_reset(state, params, missing)
@@ -508,7 +508,7 @@ class UncertainOscillator(FilteredPlant):
                                 "simulation_failure": failure, "delta": delta}
         if self.burst:
             info["burst"] = burst
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             model = self.filter_model(params)
             xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model.Q, model.f_and_F)
             new = self.own_update(missing, new, ekf_update(new, xp, Pp, y, params), xp, Pp,

@@ -513,7 +513,7 @@ class VanDerPol(FilteredPlant):
         y = self.deliver(missing, x[:1] + noise.measurement, self.first_hold(params))
         x0, P0 = filter_prior(params)
         state = VanDerPolState.start(x, y, x0, P0)
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             updated = watch_state(state, *ekf_correct(x0, P0, y, params),
                                   watch_limits_of(params))
             state = self.own_update(missing, state, updated, x0, P0, params)
@@ -549,7 +549,7 @@ class VanDerPol(FilteredPlant):
         force, force_model = u[0] * params.u_max, u[0] * params.nominal_u_max
         tau = params.h / params.substeps
         tau_model = params.nominal_h / params.nominal_substeps
-        fused = self.kind == "ekf" and params.substeps == params.nominal_substeps
+        fused = self.runs_own_filter and params.substeps == params.nominal_substeps
         if fused:            # the plant's and the model's Heun loops as one (same numbers)
             x_next, x1_average, xp, F = heun_plant_and_model_intervals(
                 x, force, noise.process, params.epsilon, tau, state.filter_x, force_model,
@@ -586,7 +586,7 @@ class VanDerPol(FilteredPlant):
                                 "simulation_failure": failure, "x1_average": x1_average}
         if self.burst:
             info["burst"] = burst
-        if self.kind == "ekf":
+        if self.runs_own_filter:
             if fused:
                 Pp = ekf_predict(state.filter_x, state.filter_P, u, params.model_Q,
                                  lambda *_: (xp, F))[1]
