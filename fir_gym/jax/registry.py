@@ -107,8 +107,8 @@ def make(env_id: str, kind: str | None = None, *,
 
 
 def _sensor_faults(env_id: str, sensor_faults: Any) -> dict[str, Any]:
-    """The faults of ``sensor_faults`` the JAX sensor has, as its keywords (``{}`` for
-    none); ValueError naming a fault it does not have (the plant's class checks the values)."""
+    """``sensor_faults`` as the plant class's keywords (``{}`` for none); ValueError naming a
+    fault that is not among :data:`JAX_FAULTS` (the plant's class checks the values)."""
     if not sensor_faults:
         return {}
     if not isinstance(sensor_faults, dict):
@@ -116,7 +116,6 @@ def _sensor_faults(env_id: str, sensor_faults: Any) -> dict[str, Any]:
                          f"{type(sensor_faults).__name__}")
     other = sorted(set(sensor_faults) - set(JAX_FAULTS))
     if other:
-        raise ValueError(f"{env_id}: the JAX sensor has {', '.join(JAX_FAULTS)}; "
-                         f"sensor_faults names {other} (the numpy envs have every fault: "
-                         "gym.make(..., sensor_faults=...))")
+        raise ValueError(f"{env_id}: sensor_faults names {other}; the sensor's faults are "
+                         f"{', '.join(JAX_FAULTS)}")
     return dict(sensor_faults)

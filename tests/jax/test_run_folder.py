@@ -38,8 +38,8 @@ KINDS = {"true": {}, "efir": {"horizon": 5}, "recurrent": {}}
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("jax-cache")
+def cache(jax_cache: Path) -> Path:
+    return jax_cache
 
 
 @pytest.fixture(scope="module")

@@ -154,9 +154,11 @@ def test_the_filters_read_what_the_faulty_sensor_delivers(env_id: str, kind: str
 
 
 def test_what_the_jax_sensor_lacks_or_refuses_is_one_line() -> None:
-    with pytest.raises(ValueError, match=r"the JAX sensor has dropout, outliers, bias, every, "
-                                         r"stuck; sensor_faults names \['delay'\]"):
-        make("fir_gym/Orbit-v0", sensor_faults={"dropout": 0.1, "delay": 2})
+    with pytest.raises(ValueError, match=r"sensor_faults names \['jitter'\]; the sensor's faults "
+                                         r"are dropout, outliers, bias, every, stuck, delay"):
+        make("fir_gym/Orbit-v0", sensor_faults={"dropout": 0.1, "jitter": 2})
+    with pytest.raises(ValueError, match="delay=1000 is not shorter than an episode"):
+        make("fir_gym/Orbit-v0", sensor_faults={"delay": 1000})
     with pytest.raises(ValueError, match="stuck's mean number of steps must be >= 1"):
         make("fir_gym/Orbit-v0", sensor_faults={"stuck": (0.1, 0.5)})
     with pytest.raises(ValueError, match="outliers' scale must be a positive"):

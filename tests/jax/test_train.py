@@ -2,7 +2,7 @@
 
 Tiny runs (two PPO iterations of the shipped 16 x 256 rollout) except the oracle, which
 trains the ``true`` kind long enough for PPO to beat the zero-action and random policies
-by a wide margin. The compilation cache is a temporary folder of this module.
+by a wide margin. The compilation cache is the test session's (tests/jax/conftest.py).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from fir_gym.jax import train as jt
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("jax-cache")
+def cache(jax_cache: Path) -> Path:
+    return jax_cache
 
 
 @pytest.fixture(scope="module")
@@ -306,13 +306,17 @@ def test_the_cache_folder_is_overridable(monkeypatch: pytest.MonkeyPatch, tmp_pa
     assert jt.cache_dir() == tmp_path / "x" / "fir-gym" / "jax"
 
 
-def test_the_compilation_cache_moves_to_another_folder(tmp_path: Path) -> None:
+def test_the_compilation_cache_moves_to_another_folder(tmp_path: Path, jax_cache: Path
+                                                       ) -> None:
     """JAX opens its cache once; a second folder in the same process still gets the
-    programs compiled after it."""
-    for i, name in enumerate(("a", "b")):
-        jt.enable_compilation_cache(tmp_path / name)
-        jax.jit(lambda x, i=i: x * (i + 7.25) + 1.0)(jnp.ones(3)).block_until_ready()
-        assert any((tmp_path / name).iterdir()), name
+    programs compiled after it (and the session's cache is put back afterwards)."""
+    try:
+        for i, name in enumerate(("a", "b")):
+            jt.enable_compilation_cache(tmp_path / name)
+            jax.jit(lambda x, i=i: x * (i + 7.25) + 1.0)(jnp.ones(3)).block_until_ready()
+            assert any((tmp_path / name).iterdir()), name
+    finally:
+        jt.enable_compilation_cache(jax_cache)
 
 
 # ---------------------------------------------------------------------------- the oracle
