@@ -14,7 +14,7 @@ from gymnax.environments import spaces
 from ._x64 import require_x64
 from .filter_model import FilterModel
 from .filters import GENERIC_FILTERS, FilterKind
-from .kalman import Belief, WatchLimits, ekf_predict, kf_update_innovation, watch
+from .kalman import Belief, WatchLimits, ekf_predict, kf_update, watch
 from .measurement_stack import stack_observation, stack_push, stack_start
 
 #: the numpy plants' ``STATE_LIMIT`` (:data:`fir_gym.envs._base.STATE_LIMIT`; PendulumSlider-v0
@@ -403,9 +403,9 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         k = new.time
         lag = old.delayed
         inputs = jnp.concatenate([lag.inputs[1:], jnp.reshape(u, (1, -1))])
-        x0, P0 = filter_prior(params)
-        first = kind.update(kind.start(x0, P0, options), x0, P0, new.y, model, options,
-                            missing=missing)
+        # until k = d the lagged belief and memory are the reset's (the prior, the kind's
+        # start): at k = d the filter's first update starts from them
+        first = kind.update(old.memory, lag.x, lag.P, new.y, model, options, missing=missing)
         later = kind.predict_update(old.memory, lag.x, lag.P, new.y, inputs[0], model,
                                     options, missing=missing)
         memory, x, P, nis = jax.tree.map(lambda a, b: jnp.where(k == d, a, b), first, later)
@@ -513,14 +513,16 @@ class FilteredPlant(gymnax_env.Environment[Any, Any]):
         With a delay, ``new.y`` (the sensor's reading of the step) enters the line and the
         reading due is delivered (:meth:`transmit`; its flags, ``late`` added, are
         ``sensor_faults``), and a filter kind runs behind it (:meth:`lagged_step`)."""
-        if isinstance(missing, Reading) and self.faults.active:
-            info["sensor_faults"] = missing.flags()
-            if self.faults.stuck_probability:
-                new = new.replace(sensor_stuck=missing.stuck)
+        if self.burst:
+            info["burst"] = self.burst_delta(old.time)
+        if isinstance(missing, Reading) and self.faults.stuck_probability:
+            new = new.replace(sensor_stuck=missing.stuck)
         if self.delay:               # the step's reading enters the line, y[k − d] leaves it
             line, y, missing, info["sensor_faults"] = self.transmit(
                 old.sensor_line, new.time, new.y, line_flags(missing), old.y)
             new = new.replace(y=y, sensor_line=line)
+        elif isinstance(missing, Reading) and self.faults.active:
+            info["sensor_faults"] = missing.flags()
         missing = lost(missing)
         if self.kind == "measurement-stack":
             new = new.replace(memory=stack_push(old.memory, new.y, u))
@@ -602,7 +604,7 @@ def _own_update(memory: Any, x: jax.Array, P: jax.Array, y: jax.Array, model: Fi
                 options: Any, missing: jax.Array | bool = False) -> Any:
     """The textbook EKF's (a KF's) update on ``model``: the prior kept and a NaN NIS where
     the reading is ``missing``."""
-    xu, Pu, nis = kf_update_innovation(x, P, y - model.H @ x, model.H, model.R)
+    xu, Pu, nis = kf_update(x, P, y, model.H, model.R)
     missing = jnp.asarray(missing)
     return (memory, jnp.where(missing, x, xu), jnp.where(missing, P, Pu),
             jnp.where(missing, jnp.nan, nis))

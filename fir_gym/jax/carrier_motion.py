@@ -482,8 +482,6 @@ class CarrierMotion(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "compensator_offset": offset, "simulation_failure": failure}
-        if self.burst:
-            info["burst"] = burst
         if self.runs_own_filter:
             xp, Pp = kf_predict(state.filter_x, state.filter_P, params.nominal_A_d,
                                 params.nominal_Q_d)

@@ -442,8 +442,6 @@ class Orbit(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure}
-        if self.burst:
-            info["burst"] = burst
         if self.runs_own_filter:
             if not fused:
                 xp, F = orbit_interval(state.filter_x, a_model, params.nominal_mu,

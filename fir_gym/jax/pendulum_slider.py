@@ -743,8 +743,6 @@ class PendulumSlider(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "force": u[0] * params.force_max, "simulation_failure": failure}
-        if self.burst:
-            info["burst"] = burst
         if self.runs_own_filter:
             if prediction is None:
                 xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, params.nominal_Q,

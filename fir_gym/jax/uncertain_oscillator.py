@@ -506,8 +506,6 @@ class UncertainOscillator(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure, "delta": delta}
-        if self.burst:
-            info["burst"] = burst
         if self.runs_own_filter:
             model = self.filter_model(params)
             xp, Pp = ekf_predict(state.filter_x, state.filter_P, u, model.Q, model.f_and_F)

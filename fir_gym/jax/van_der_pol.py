@@ -560,8 +560,7 @@ class VanDerPol(FilteredPlant):
         burst = self.burst_delta(state.time)
         if self.burst:       # the whole path stretched about its start: its end and average
             x_next = self.stretch(x, x_next, burst)
-            x1_average = jnp.where(burst != 0.0, x[0] + (1.0 + burst) * (x1_average - x[0]),
-                                   x1_average)
+            x1_average = self.stretch(x[0], x1_average, burst)
         time = state.time + 1
         left = jnp.maximum(params.max_steps_in_episode - time, 0)
         cost_cap = params.state_bound ** 2 / 2.0 + 0.01
@@ -584,8 +583,6 @@ class VanDerPol(FilteredPlant):
         new = state.replace(time=time, x=x_kept, y=y, terminated=terminated)
         info: dict[str, Any] = {"state": x_kept, "action": u, "action_clipped": jnp.any(u != u_in),
                                 "simulation_failure": failure, "x1_average": x1_average}
-        if self.burst:
-            info["burst"] = burst
         if self.runs_own_filter:
             if fused:
                 Pp = ekf_predict(state.filter_x, state.filter_P, u, params.model_Q,

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from jax_parity import flat, flat_jax
 
 #: per plant, the env keywords of the test episodes (both backends): process noise on
 #: (Orbit-v0 and PendulumSlider-v0 draw none without it), a random start, UncertainOscillator
@@ -72,14 +73,6 @@ class FedNormals:
 
     def used_up(self) -> bool:
         return self.buffer.size == 0
-
-
-def flat(obs: Any) -> np.ndarray:
-    """An observation as one float64 vector (a dict's entries in key order)."""
-    if isinstance(obs, dict):
-        return np.concatenate([np.asarray(obs[key], dtype=np.float64).reshape(-1)
-                               for key in sorted(obs)])
-    return np.asarray(obs, dtype=np.float64).reshape(-1)
 
 
 def numpy_run(env: Any, normals: list[np.ndarray], actions: np.ndarray) -> dict[str, np.ndarray]:
@@ -170,13 +163,13 @@ def jax_record(obs0: Any, state0: Any, trace: Any, n: int, first_late: bool = Fa
     def joined(first: Any, rest: Any) -> np.ndarray:
         return np.concatenate([np.asarray(first)[None], np.asarray(rest)])[:n]
 
-    flat_obs = np.asarray(jax.vmap(lambda o: _flat_jax(o))(obs))
+    flat_obs = np.asarray(jax.vmap(lambda o: flat_jax(o))(obs))
     late0 = first_late
     faults = info.get("sensor_faults", {})
     late = np.asarray(faults["late"]) if "late" in faults else np.zeros(len(flat_obs), bool)
     missing = np.asarray(info.get("measurement_missing", np.zeros(len(flat_obs), bool)))
     return {
-        "obs": joined(np.asarray(_flat_jax(obs0)), flat_obs),
+        "obs": joined(np.asarray(flat_jax(obs0)), flat_obs),
         "reward": joined(0.0, reward), "terminated": joined(False, terminated),
         "truncated": joined(False, truncated), "state": joined(s0.x, s.x),
         "burst": joined(0.0, info.get("burst", np.zeros(len(flat_obs)))),
@@ -184,14 +177,6 @@ def jax_record(obs0: Any, state0: Any, trace: Any, n: int, first_late: bool = Fa
         "P": joined(s0.filter_P, s.filter_P), "nis": joined(s0.nis, s.nis),
         "diverged": joined(s0.diverged, s.diverged),
         "estimate": joined(s0.filter_x, s.filter_x)}
-
-
-def _flat_jax(obs: Any) -> Any:
-    import jax.numpy as jnp
-
-    if isinstance(obs, dict):
-        return jnp.concatenate([jnp.reshape(obs[key], (-1,)) for key in sorted(obs)])
-    return jnp.reshape(obs, (-1,))
 
 
 def worst_differences(got: dict[str, np.ndarray], want: dict[str, np.ndarray],

@@ -27,7 +27,7 @@ def flat(obs: Any) -> np.ndarray:
     if isinstance(obs, dict):
         return np.concatenate([np.asarray(obs[key], dtype=np.float64).reshape(-1)
                                for key in sorted(obs)])
-    return np.asarray(obs, dtype=np.float64)
+    return np.asarray(obs, dtype=np.float64).reshape(-1)
 
 
 def flat_jax(obs: Any) -> Any:
@@ -36,7 +36,7 @@ def flat_jax(obs: Any) -> Any:
 
     if isinstance(obs, dict):
         return jnp.concatenate([jnp.reshape(obs[key], (-1,)) for key in sorted(obs)])
-    return obs
+    return jnp.reshape(obs, (-1,))
 
 
 def relative_error(got: np.ndarray, want: np.ndarray) -> float:

@@ -39,8 +39,8 @@ STEPS = 120
 RTOL = 1e-9
 #: one plant per filter kind (the first that has it): every (plant, kind) pair predicts
 #: through lost readings in tests/jax/test_sensor_faults.py, dropout among the faults there
-FILTER_CASES = list({kind: (env_id, kind) for env_id, kind in reversed(filter_cases())
-                     }.values())
+FILTER_CASES = [(env_id, kind) for i, (env_id, kind) in enumerate(filter_cases())
+                if kind not in {k for _, k in filter_cases()[:i]}]
 
 
 def _rollout(env: Any, params: Any, actions: np.ndarray, seed: int) -> list[Any]:
