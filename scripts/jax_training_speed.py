@@ -42,18 +42,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n-envs", type=int, default=None,
                         help="JAX envs (default: the recipe's 16; the minibatch size stays "
                              "the recipe's, so there are more minibatches)")
+    parser.add_argument("--network-dtype", default="float32", choices=["float32", "float64"],
+                        help="the JAX networks' arithmetic (default: the shipped float32)")
     args = parser.parse_args(argv)
     warnings.filterwarnings("ignore")
     before = load_average()
     print(f"{cpu_model()}, {cores()} cores, load average {before} at the start")
-    jax1 = jax_rate(args.steps, 1, args.cache, n_envs=args.n_envs)
+    jax1 = jax_rate(args.steps, 1, args.cache, n_envs=args.n_envs,
+                    network_dtype=args.network_dtype)
     envs = args.n_envs or 16
     print(f"JAX PPO, 1 seed x {envs} envs: {jax1['rate']:,.0f} env-steps/s ({jax1['steps']} "
           f"steps in {jax1['seconds']:.2f} s; compile {jax1['compile_seconds']:.1f} s)",
           flush=True)
     jaxs = None
     if args.seeds > 1:
-        jaxs = jax_rate(args.steps, args.seeds, args.cache, n_envs=args.n_envs)
+        jaxs = jax_rate(args.steps, args.seeds, args.cache, n_envs=args.n_envs,
+                        network_dtype=args.network_dtype)
         print(f"JAX PPO, {args.seeds} seeds vmapped x {envs} envs: {jaxs['rate']:,.0f} "
               f"env-steps/s ({jaxs['steps']} steps in {jaxs['seconds']:.2f} s; compile "
               f"{jaxs['compile_seconds']:.1f} s)", flush=True)

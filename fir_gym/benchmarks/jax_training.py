@@ -136,20 +136,23 @@ def numpy_stepping_rate(n_envs: int, steps: int, reps: int, conditions: bool = F
 
 
 def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: bool = False,
-                 n_envs: int | None = None, kind: str = KIND) -> dict[str, Any]:
+                 n_envs: int | None = None, kind: str = KIND,
+                 network_dtype: str = "float32") -> dict[str, Any]:
     """``{"steps", "seconds", "compile_seconds", "rate"}`` of JAX PPO (``seeds`` vmapped):
     the training iterations of ``steps`` as one program, the faster of two timed runs;
     ``free``: on :func:`free_env` instead of Orbit-v0 (PPO's own cost); ``n_envs``: the
     recipe's 16 envs replaced (the rollout grows with it, the minibatch size stays);
     ``kind``: what the policy observes (``"recurrent"``: RecurrentPPO's recipe and LSTM
-    policy on the measurement)."""
+    policy on the measurement); ``network_dtype``: the networks' arithmetic (the shipped
+    float32, or float64: :mod:`fir_gym.jax.train`)."""
     import jax
 
     from fir_gym.jax import train as jt
 
     if cache:
         jt.enable_compilation_cache(cache)
-    rec = jt.recipe(ENV_ID, steps=steps, n_envs=n_envs, kind=kind)
+    rec = jt.recipe(ENV_ID, steps=steps, n_envs=n_envs, kind=kind,
+                    network_dtype=network_dtype)
     if free:
         env = free_env()
         params = env.default_params
@@ -264,6 +267,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     sb3 = sb3_ppo_rate(ppo_steps)
     jax_ppo = jax_ppo_rate(ppo_steps)
     jax_free = jax_ppo_rate(ppo_steps, free=True)
+    jax_ppo64 = None if quick else jax_ppo_rate(ppo_steps, network_dtype="float64")
     batches = NUMPY_BATCHES[:1] if quick else NUMPY_BATCHES
     steps, reps = (20, 2) if quick else (100, 3)
     numpy_rates = {b: numpy_stepping_rate(b, max(5, steps * 256 // b), reps) for b in batches}
@@ -284,6 +288,7 @@ def run(quick: bool = False) -> dict[str, Any]:
             "ppo": {"sb3_steps_per_s": sb3["rate"], "jax_steps_per_s": jax_ppo["rate"],
                     "jax_compile_seconds": jax_ppo["compile_seconds"],
                     "jax_free_steps_per_s": jax_free["rate"],
+                    "jax_float64_steps_per_s": jax_ppo64["rate"] if jax_ppo64 else None,
                     "ratio": jax_ppo["rate"] / sb3["rate"],
                     "ceiling": jax_free["rate"] / sb3["rate"], "steps": ppo_steps},
             "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
@@ -310,7 +315,8 @@ def print_results(res: dict[str, Any]) -> None:
         [["PPO, shipped recipe, 16 envs", p["sb3_steps_per_s"], p["jax_steps_per_s"],
           p["ratio"], "≥ 6", f"PPO alone (a free env): {p['jax_free_steps_per_s']:.4g} "
           f"steps/s (ceiling {p['ceiling']:.3g}); compile {p['jax_compile_seconds']:.1f} s, "
-          "not counted"],
+          "not counted" + (f"; networks in float64: {f64:.4g} steps/s"
+                           if (f64 := p.get("jax_float64_steps_per_s")) else "")],
          [f"stepping, JAX {s['jax_envs']} envs / numpy best ({s['numpy_best_batch']} envs)",
           s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_steps_per_s"], s["ratio"],
           "≥ 2", f"noise given, no auto-reset: {s['jax_given_noise_steps_per_s']:.4g} "

@@ -33,7 +33,7 @@ Carry = tuple[Any, Any]
 
 
 def _uniform(bound: float) -> Any:
-    def init(key: Any, shape: tuple[int, ...], dtype: Any = jnp.float64) -> Any:
+    def init(key: Any, shape: tuple[int, ...], dtype: Any = jnp.float32) -> Any:
         return jax.random.uniform(key, shape, dtype, -bound, bound)
 
     return init
@@ -44,30 +44,33 @@ class LSTMCell(nn.Module):
     docstring)."""
 
     features: int
+    #: the parameters' and the arithmetic's dtype (the input and the carry are cast to it)
+    dtype: Any = jnp.float32
 
     @nn.compact
     def __call__(self, carry: Carry, x: Any) -> Carry:
-        h, c = carry
+        h, c = (part.astype(self.dtype) for part in carry)
+        x = x.astype(self.dtype)
         init = _uniform(1.0 / math.sqrt(self.features))
-        w_ih = self.param("weight_ih", init, (4 * self.features, x.shape[-1]))
-        w_hh = self.param("weight_hh", init, (4 * self.features, self.features))
-        b_ih = self.param("bias_ih", init, (4 * self.features,))
-        b_hh = self.param("bias_hh", init, (4 * self.features,))
+        w_ih = self.param("weight_ih", init, (4 * self.features, x.shape[-1]), self.dtype)
+        w_hh = self.param("weight_hh", init, (4 * self.features, self.features), self.dtype)
+        b_ih = self.param("bias_ih", init, (4 * self.features,), self.dtype)
+        b_hh = self.param("bias_hh", init, (4 * self.features,), self.dtype)
         gates = x @ w_ih.T + b_ih + h @ w_hh.T + b_hh
         i, f, g, o = jnp.split(gates, 4, axis=-1)
         c = nn.sigmoid(f) * c + nn.sigmoid(i) * jnp.tanh(g)
         return nn.sigmoid(o) * jnp.tanh(c), c
 
 
-def zeros(batch: int, features: int) -> Carry:
+def zeros(batch: int, features: int, dtype: Any = jnp.float32) -> Carry:
     """The carry an episode starts from (torch's and sb3-contrib's: zeros)."""
-    return jnp.zeros((batch, features)), jnp.zeros((batch, features))
+    return jnp.zeros((batch, features), dtype), jnp.zeros((batch, features), dtype)
 
 
 def step(cell: LSTMCell, params: Any, carry: Carry, x: Any, start: Any) -> Carry:
     """One step for a batch: ``x (batch, n)``; ``start (batch,)`` marks the first step of an
     episode, where the carry is cleared first. Returns the new carry (its ``h`` is the output)."""
-    keep = 1.0 - jnp.asarray(start, dtype=x.dtype)[:, None]
+    keep = 1.0 - jnp.asarray(start, dtype=carry[0].dtype)[:, None]
     return cell.apply(params, (carry[0] * keep, carry[1] * keep), x)
 
 

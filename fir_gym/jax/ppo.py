@@ -63,6 +63,10 @@ UNMATCHED = (
 )
 #: stable-baselines3's Adam epsilon
 ADAM_EPS = 1e-5
+#: the networks' arithmetic (``Recipe.network_dtype``): float32 by default, as PyTorch's
+#: modules compute in stable-baselines3; the plants, the filters, the normalisation
+#: statistics, the returns and the advantages stay float64
+NETWORK_DTYPES = {"float32": jnp.float32, "float64": jnp.float64}
 
 
 class Gymnax0(gymnax_env.Environment):
@@ -98,50 +102,57 @@ class Gymnax0(gymnax_env.Environment):
         return self.env.action_space(params)
 
 
-def _dense(features: int, gain: float) -> nn.Dense:
+def _dense(features: int, gain: float, dtype: Any) -> nn.Dense:
     """A layer initialised as stable-baselines3's ``ortho_init``: orthogonal weights of
-    ``gain``, zero biases."""
+    ``gain``, zero biases; parameters and arithmetic in ``dtype``."""
     return nn.Dense(features, kernel_init=nn.initializers.orthogonal(gain),
-                    bias_init=nn.initializers.zeros)
+                    bias_init=nn.initializers.zeros, dtype=dtype, param_dtype=dtype)
 
 
 class Features(nn.Module):
-    """SB3's MLP extractor: hidden layers with orthogonal weights of gain √2."""
+    """SB3's MLP extractor: hidden layers with orthogonal weights of gain √2, computing in
+    ``dtype`` (the input is cast to it first: :data:`NETWORK_DTYPES`)."""
 
     hidden_layer_sizes: tuple[int, ...]
     activation: Any
+    dtype: Any = jnp.float32
 
     @nn.compact
     def __call__(self, x: Any) -> Any:
-        x = x.reshape((x.shape[0], -1))
+        x = x.reshape((x.shape[0], -1)).astype(self.dtype)
         for size in self.hidden_layer_sizes:
-            x = self.activation(_dense(size, math.sqrt(2.0))(x))
+            x = self.activation(_dense(size, math.sqrt(2.0), self.dtype)(x))
         return x
 
 
 class Critic(nn.Module):
-    """The value network: :class:`Features`, then one output of gain 1 (SB3's)."""
+    """The value network: :class:`Features`, then one output of gain 1 (SB3's), computing in
+    ``dtype``; the value is returned in float64, the rewards', in which the returns and the
+    advantages are computed."""
 
     hidden_layer_sizes: tuple[int, ...]
     activation: Any
+    dtype: Any = jnp.float32
 
     @nn.compact
     def __call__(self, obs: Any) -> Any:
-        x = Features(self.hidden_layer_sizes, self.activation)(obs)
-        return _dense(1, 1.0)(x).squeeze(1)
+        x = Features(self.hidden_layer_sizes, self.activation, self.dtype)(obs)
+        return _dense(1, 1.0, self.dtype)(x).squeeze(1).astype(jnp.float64)
 
 
 class Policy(GaussianPolicy):
     """rejax's Gaussian policy initialised as SB3's (:class:`Features`, the mean's layer of
-    gain 0.01, ``log_std`` = ``log_std_init``), with a deterministic action."""
+    gain 0.01, ``log_std`` = ``log_std_init``), with a deterministic action, computing in
+    ``dtype`` (its actions and log-probabilities are of that dtype)."""
 
     log_std_init: float = 0.0
+    dtype: Any = jnp.float32
 
     def setup(self) -> None:
-        self.features = Features(tuple(self.hidden_layer_sizes), self.activation)
-        self.action_mean = _dense(self.action_dim, 0.01)
+        self.features = Features(tuple(self.hidden_layer_sizes), self.activation, self.dtype)
+        self.action_mean = _dense(self.action_dim, 0.01, self.dtype)
         self.action_log_std = self.param("action_log_std", constant(self.log_std_init),
-                                         (self.action_dim,))
+                                         (self.action_dim,), self.dtype)
 
     def mean_action(self, obs: Any) -> Any:
         mean = self.action_mean(self.features(obs))
@@ -153,6 +164,8 @@ class SB3LikePPO(PPO):
 
     clip_obs: float = struct.field(pytree_node=False, default=math.inf)
     clip_reward: float = struct.field(pytree_node=False, default=math.inf)
+    #: the networks' arithmetic, a key of :data:`NETWORK_DTYPES`
+    network_dtype: str = struct.field(pytree_node=False, default="float32")
 
     @register_init
     def initialize_network_params(self, rng: Any) -> dict[str, Any]:

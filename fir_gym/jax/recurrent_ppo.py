@@ -50,7 +50,7 @@ from flax import struct  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 
 from . import lstm  # noqa: E402
-from .ppo import SB3LikePPO, actor_loss  # noqa: E402
+from .ppo import NETWORK_DTYPES, SB3LikePPO, actor_loss  # noqa: E402
 
 #: where this training differs from sb3-contrib's RecurrentPPO (besides SB3LikePPO's own)
 UNMATCHED = (
@@ -92,14 +92,18 @@ class RecurrentPPO(SB3LikePPO):
 
     @property
     def cell(self) -> lstm.LSTMCell:
-        return lstm.LSTMCell(self.lstm_hidden_size)
+        return lstm.LSTMCell(self.lstm_hidden_size, NETWORK_DTYPES[self.network_dtype])
+
+    def zero_carry(self, batch: int) -> lstm.Carry:
+        """The carry of ``batch`` envs at an episode's start, in the networks' dtype."""
+        return lstm.zeros(batch, self.lstm_hidden_size, NETWORK_DTYPES[self.network_dtype])
 
     @register_init
     def initialize_network_params(self, rng: Any) -> dict[str, Any]:
         keys = jax.random.split(rng, 4)
         n_obs = self.env.observation_space(self.env_params).shape[0]
-        carry = lstm.zeros(1, self.lstm_hidden_size)
-        latent = jnp.zeros((1, self.lstm_hidden_size))
+        carry = self.zero_carry(1)
+        latent = carry[0]
         actor = {"lstm": self.cell.init(keys[0], carry, jnp.zeros((1, n_obs))),
                  "head": self.actor.init(keys[1], latent, keys[1])}
         critic = {"lstm": self.cell.init(keys[2], carry, jnp.zeros((1, n_obs))),
@@ -108,8 +112,8 @@ class RecurrentPPO(SB3LikePPO):
 
     @register_init
     def initialize_lstm_carries(self, rng: Any) -> dict[str, Any]:
-        return {"actor_carry": lstm.zeros(self.num_envs, self.lstm_hidden_size),
-                "critic_carry": lstm.zeros(self.num_envs, self.lstm_hidden_size)}
+        return {"actor_carry": self.zero_carry(self.num_envs),
+                "critic_carry": self.zero_carry(self.num_envs)}
 
     # ------------------------------------------------------------------ the networks
     def actor_step(self, params: Any, carry: Any, obs: Any, start: Any) -> tuple[Any, Any]:
@@ -123,7 +127,7 @@ class RecurrentPPO(SB3LikePPO):
         return carry, self.critic.apply(params["head"], carry[0])
 
     def policy_carry(self, batch: int) -> Any:
-        return lstm.zeros(batch, self.lstm_hidden_size)
+        return self.zero_carry(batch)
 
     def policy_action(self, actor_params: Any, carry: Any, obs: Any, start: Any
                       ) -> tuple[Any, Any]:

@@ -21,6 +21,14 @@ with sb3-contrib's LSTM policy) on the ``measurement`` env with the recipe of
 the deterministic policy of every kind is :meth:`SB3LikePPO.policy_action`, with the state
 it carries from step to step (:meth:`SB3LikePPO.policy_carry`: none, or the LSTMs').
 
+**The networks compute in float32** (``Recipe.network_dtype``), as PyTorch's modules do in
+stable-baselines3 and sb3-contrib: their parameters, activations, gradients and Adam's
+moments; the plant, its filter, the normalisation statistics, the rewards, the values, the
+returns and the advantages stay float64. ``network_dtype="float64"`` (:func:`recipe`,
+:func:`train`) computes the networks in float64 too (what the tests compare with torch's
+double-precision modules); a run folder saved before the field existed was trained that way
+(its kernels stored in float32, widened exactly when it is read) and is read as such.
+
 **Returns** are what :func:`fir_gym.training.evaluate` reports: the undiscounted sum of the
 plant's raw reward over whole episodes, the policy deterministic (the Gaussian's mean,
 clipped to the action box), observations through the run's final normalisation
@@ -47,6 +55,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .ppo import ADAM_EPS as ADAM_EPS  # noqa: E402  (the algorithm, re-exported)
+from .ppo import NETWORK_DTYPES as NETWORK_DTYPES  # noqa: E402
 from .ppo import UNMATCHED as UNMATCHED  # noqa: E402
 from .ppo import Critic as Critic  # noqa: E402
 from .ppo import Gymnax0 as Gymnax0  # noqa: E402
@@ -123,6 +132,9 @@ class Recipe:
     #: the LSTM's units of the ``recurrent`` kind's policy (sb3-contrib's
     #: ``lstm_hidden_size``); 0 for the feed-forward policy of every other kind
     lstm_hidden_size: int = 0
+    #: the networks' arithmetic, a key of :data:`fir_gym.jax.ppo.NETWORK_DTYPES` (module
+    #: docstring)
+    network_dtype: str = "float32"
 
     @property
     def rollout(self) -> int:
@@ -136,7 +148,8 @@ class Recipe:
 
 def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
            n_envs: int | None = None, algo_kwargs: dict[str, Any] | None = None,
-           hyperparams: str | None = None, kind: str = "true") -> Recipe:
+           hyperparams: str | None = None, kind: str = "true",
+           network_dtype: str = "float32") -> Recipe:
     """The shipped (or ``hyperparams``) PPO recipe of ``env_id`` in rejax's terms.
 
     Read through :meth:`fir_gym.training.RunConfig.settings`, so the overrides and the
@@ -146,9 +159,14 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
     actor and critic layers, value clipping, advantages not normalised, a minibatch size that
     does not divide the rollout; for ``recurrent`` an LSTM other than sb3-contrib's default
     arrangement (one layer, the critic's own), and minibatches that are not whole envs'
-    sequences (``num_envs`` divisible by the number of minibatches).
+    sequences (``num_envs`` divisible by the number of minibatches); a ``network_dtype`` not
+    in :data:`fir_gym.jax.ppo.NETWORK_DTYPES`.
     """
     from fir_gym.training.run import RunConfig
+
+    if network_dtype not in NETWORK_DTYPES:
+        raise ValueError(f"network_dtype must be one of {list(NETWORK_DTYPES)}; got "
+                         f"{network_dtype!r}")
 
     recurrent = kind == "recurrent"
     settings = RunConfig(env_id, "recurrent" if recurrent else "true", algo="ppo",
@@ -210,7 +228,7 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
         clip_obs=float(norm["clip_obs"]) if norm else math.inf,
         clip_reward=float(norm["clip_reward"]) if norm else math.inf,
         lstm_hidden_size=int(policy.get("lstm_hidden_size", LSTM_DEFAULTS["lstm_hidden_size"]))
-        if recurrent else 0)
+        if recurrent else 0, network_dtype=network_dtype)
 
 
 def make_env(env_id: str, kind: str, env_kwargs: dict[str, Any] | None = None,
@@ -240,13 +258,16 @@ def make_algorithm(env: Any, params: Any, rec: Recipe) -> SB3LikePPO:
         max_grad_norm=rec.max_grad_norm, normalize_observations=rec.normalize_observations,
         normalize_rewards=rec.normalize_rewards, reward_normalization_discount=rec.gamma,
         clip_obs=rec.clip_obs, clip_reward=rec.clip_reward,
-        total_timesteps=rec.iterations * rec.rollout, skip_initial_evaluation=True,
+        network_dtype=rec.network_dtype, total_timesteps=rec.iterations * rec.rollout,
+        skip_initial_evaluation=True,
         agent_kwargs={"activation": rec.activation,
                       "hidden_layer_sizes": rec.hidden_layer_sizes})
     space = env.action_space(params)
+    dtype = NETWORK_DTYPES[rec.network_dtype]
     actor = Policy(int(np.prod(space.shape)), (space.low, space.high),
-                   rec.hidden_layer_sizes, algo.actor.activation, log_std_init=rec.log_std_init)
-    critic = Critic(rec.hidden_layer_sizes, algo.actor.activation)
+                   rec.hidden_layer_sizes, algo.actor.activation, log_std_init=rec.log_std_init,
+                   dtype=dtype)
+    critic = Critic(rec.hidden_layer_sizes, algo.actor.activation, dtype=dtype)
     return algo.replace(actor=actor, critic=critic)
 
 
@@ -401,7 +422,8 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
           env_kwargs: dict[str, Any] | None = None, hyperparams: str | None = None,
           kind_kwargs: dict[str, Any] | None = None, checkpoints: int = 10,
           curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000,
-          cache: str | Path | bool | None = True) -> JaxTraining:
+          cache: str | Path | bool | None = True, network_dtype: str = "float32"
+          ) -> JaxTraining:
     """Train PPO on ``env_id`` observing ``kind`` for every seed in one compiled program.
 
     ``seeds``: a list, or a count (``0..n-1``). ``kind_kwargs``: the kind's options
@@ -409,6 +431,7 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
     ``curve_episodes`` episodes along training make the curves, ``episodes`` at the end the
     final returns (module docstring). ``cache``: ``True`` for :func:`cache_dir`, a folder,
     or ``False``/``None`` for none (what is already on leaves JAX's setting as it is).
+    ``network_dtype``: the networks' arithmetic (module docstring).
     """
     check_supported(env_id, kind)
     seed_list = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
@@ -422,7 +445,7 @@ def train(env_id: str, kind: str, seeds: list[int] | int, *, steps: int | None =
     if cache:
         folder = str(enable_compilation_cache(None if cache is True else cache))
     rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
-                 hyperparams=hyperparams, kind=kind)
+                 hyperparams=hyperparams, kind=kind, network_dtype=network_dtype)
     env, params = make_env(env_id, kind, env_kwargs, kind_kwargs)
     algo = make_algorithm(env, params, rec)
     start = time.perf_counter()
@@ -542,8 +565,8 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
                  algo_kwargs: dict[str, Any] | None = None,
                  env_kwargs: dict[str, Any] | None = None, hyperparams: str | None = None,
                  kind_kwargs: dict[str, Any] | None = None, checkpoints: int = 10,
-                 curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000
-                 ) -> JaxTraining | None:
+                 curve_episodes: int = 8, episodes: int = 20, eval_seed: int = 10_000,
+                 network_dtype: str = "float32") -> JaxTraining | None:
     """The run in ``out`` (:func:`load`) if it is the one :func:`train` with these arguments
     would make, or the same run trained for fewer steps that kept its training state — the
     same plant, kind, seeds, recipe but its budget, keywords and evaluation settings (the
@@ -568,7 +591,7 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
         return None
     saved = json.loads((folder / "results.json").read_text())
     rec = recipe(env_id, steps=steps, n_envs=n_envs, algo_kwargs=algo_kwargs,
-                 hyperparams=hyperparams, kind=kind)
+                 hyperparams=hyperparams, kind=kind, network_dtype=network_dtype)
     wanted = {"env_id": env_id, "kind": kind, "seeds": [int(s) for s in seeds],
               "recipe": asdict(rec), "env_kwargs": dict(env_kwargs or {}),
               "kind_kwargs": dict(kind_kwargs or {}),
@@ -582,7 +605,7 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
         mine["settings"] = {k: v for k, v in saved["settings"].items() if k != "checkpoints"}
     saved_steps = (saved.get("recipe") or {}).get("steps")
     if isinstance(mine.get("recipe"), dict):
-        mine["recipe"] = {**mine["recipe"], "steps": rec.steps}
+        mine["recipe"] = {**saved_recipe(mine["recipe"]), "steps": rec.steps}
     differ = [k for k, v in as_saved.items() if mine.get(k) != v]
     if not differ and isinstance(saved_steps, int) and saved_steps > rec.steps:
         differ = [f"steps ({saved_steps} > {rec.steps})"]
@@ -599,15 +622,23 @@ def finished_run(out: str | Path, env_id: str, kind: str, seeds: list[int], *,
     return load(folder)
 
 
-def _identity(env_id: str, kind: str, seed: int, rec: Recipe, env_kwargs: dict[str, Any],
-              kind_kwargs: dict[str, Any]) -> dict[str, str]:
+def saved_recipe(written: dict[str, Any]) -> dict[str, Any]:
+    """A ``results.json``'s recipe as :class:`Recipe`'s fields: one written before
+    ``network_dtype`` was recorded was trained with float64 networks (module docstring)."""
+    return {"network_dtype": "float64", **written}
+
+
+def _identity(env_id: str, kind: str, seed: int, rec: Recipe | dict[str, Any],
+              env_kwargs: dict[str, Any], kind_kwargs: dict[str, Any]) -> dict[str, str]:
     """What a saved policy belongs to, as strings (msgpack keeps them): the plant, the kind,
-    the seed and, as JSON, the recipe and the plant's and the kind's keywords — so that
-    :func:`load` tells a policy file of another run even where the networks' shapes agree."""
+    the seed and, as JSON, the recipe (as the run wrote it) and the plant's and the kind's
+    keywords — so that :func:`load` tells a policy file of another run even where the
+    networks' shapes agree."""
     def text(value: Any) -> str:
         return json.dumps(value, sort_keys=True)
 
-    return {"env_id": env_id, "kind": kind, "seed": str(seed), "recipe": text(asdict(rec)),
+    written = asdict(rec) if isinstance(rec, Recipe) else rec
+    return {"env_id": env_id, "kind": kind, "seed": str(seed), "recipe": text(written),
             "env_kwargs": text(env_kwargs), "kind_kwargs": text(kind_kwargs)}
 
 
@@ -623,8 +654,10 @@ def _policy_template(algo: SB3LikePPO, seeds: list[int]) -> tuple[Any, dict[str,
 def _read_policy(path: Path, template: dict[str, Any], identity: dict[str, str], run: str
                  ) -> dict[str, Any]:
     """One seed's ``policy.msgpack``: its ``run`` (where saved: files written before it was
-    are not checked) equal to ``identity``, then leaf by leaf the same names, shapes and
-    dtypes as ``template`` before flax restores it into the template's structure."""
+    are not checked) equal to ``identity``, then leaf by leaf the same names and shapes as
+    ``template`` and dtypes that widen exactly to the template's (:func:`_widened`: a
+    folder's float32 kernels into float64 networks) before flax restores it into the
+    template's structure."""
     from flax import serialization, traverse_util
 
     try:
@@ -647,11 +680,24 @@ def _read_policy(path: Path, template: dict[str, Any], identity: dict[str, str],
                          f"{', '.join(odd[:4])}" + (" ..." if len(odd) > 4 else ""))
     for name, leaf in want.items():
         got = np.asarray(have[name])
-        if got.shape != np.shape(leaf) or got.dtype != np.asarray(leaf).dtype:
+        if got.shape != np.shape(leaf) or _widened(got, np.asarray(leaf).dtype) is None:
             raise ValueError(f"{path} is not a policy of {run}: {name} is {got.dtype}"
                              f"{list(got.shape)} where the run's policy has "
                              f"{np.asarray(leaf).dtype}{list(np.shape(leaf))}")
-    return serialization.from_state_dict(template, raw)
+    restored = serialization.from_state_dict(template, raw)
+    return jax.tree.map(lambda x, leaf: _widened(np.asarray(x), np.asarray(leaf).dtype),
+                        restored, template)
+
+
+def _widened(x: np.ndarray, dtype: Any) -> np.ndarray | None:
+    """``x`` as ``dtype`` where that loses nothing (the same dtype, or a float widened:
+    float32 -> float64), else ``None``."""
+    if x.dtype == dtype:
+        return x
+    if np.issubdtype(x.dtype, np.floating) and np.issubdtype(dtype, np.floating) \
+            and np.finfo(x.dtype).bits < np.finfo(dtype).bits:
+        return x.astype(dtype)
+    return None
 
 
 def load(run_dir: str | Path) -> JaxTraining:
@@ -688,8 +734,9 @@ def load(run_dir: str | Path) -> JaxTraining:
     if absent:
         raise ValueError(f"{results} lacks {', '.join(absent)}")
     try:
-        rec = Recipe(**{**data["recipe"],
-                        "hidden_layer_sizes": tuple(data["recipe"]["hidden_layer_sizes"])})
+        written = data["recipe"]
+        rec = Recipe(**{**saved_recipe(written),
+                        "hidden_layer_sizes": tuple(written["hidden_layer_sizes"])})
     except (TypeError, KeyError) as err:
         raise ValueError(f"{results}'s recipe is not this version's ({err})") from None
     env_id, kind, seeds = str(data["env_id"]), str(data["kind"]), [int(s) for s in data["seeds"]]
@@ -709,7 +756,7 @@ def load(run_dir: str | Path) -> JaxTraining:
     algo = make_algorithm(env, params, rec)
     initial, template = _policy_template(algo, seeds)
     run = f"{results}'s plant, kind and recipe ({env_id} {kind})"
-    saved = [_read_policy(f, template, _identity(env_id, kind, s, rec, env_kwargs,
+    saved = [_read_policy(f, template, _identity(env_id, kind, s, written, env_kwargs,
                                                  kind_kwargs), run)
              for s, f in zip(seeds, files, strict=True)]
     stacked = jax.tree.map(lambda *leaves: jnp.stack(leaves), *saved)
@@ -742,6 +789,13 @@ def _read_state(path: Path, template: Any, policies: dict[str, Any]) -> Any:
     except Exception as err:                 # msgpack's and flax's errors have no common base
         raise ValueError(f"{path} is not this run's training state ({type(err).__name__}: "
                          f"{str(err)[:120]})") from None
+    leaves, tree = jax.tree.flatten(whole)
+    widened = [_widened(np.asarray(x), np.asarray(t).dtype)
+               for x, t in zip(leaves, jax.tree.leaves(template), strict=True)]
+    if any(x is None for x in widened):
+        raise ValueError(f"{path} is not this run's training state: its dtypes are not the "
+                         "run's networks'")
+    whole = jax.tree.unflatten(tree, [jnp.asarray(x) for x in widened])
     mine = {"actor": whole.actor_ts.params, "critic": whole.critic_ts.params,
             "obs_rms": whole.obs_rms_state}
     for a, b in zip(jax.tree.leaves(mine), jax.tree.leaves(policies), strict=True):

@@ -11,6 +11,11 @@ Oracles that cannot share its bugs:
   episode-start flags, and the bootstrap of an episode cut by its time limit;
 * a task only memory solves (:class:`Cue`): the recurrent PPO learns it, the feed-forward PPO
   on the same observations cannot.
+
+The comparisons with torch run our networks in float64 (``network_dtype="float64"``) against
+torch's double-precision modules, where agreement to 1e-12 tells a wrong formula from
+round-off; the shipped float32 networks are compared with sb3-contrib's float32 policy as it
+is built, to float32's round-off.
 """
 
 from __future__ import annotations
@@ -56,14 +61,16 @@ def recurrent_algorithm(env: Any, params: Any, **changes: Any
     return algo, rec
 
 
-def torch_policy(n_obs: int, seed: int = 0) -> Any:
+def torch_policy(n_obs: int, seed: int = 0, double: bool = True) -> Any:
     """sb3-contrib's policy as the SB3 backend builds it for ``recurrent`` (ppo_lstm.yml's
-    policy keywords), in float64."""
+    policy keywords), in float64 (``double=False``: in float32, as built)."""
     torch.manual_seed(seed)
     policy = RecurrentActorCriticPolicy(
         gym.spaces.Box(-np.inf, np.inf, (n_obs,), np.float64),
         gym.spaces.Box(-1.0, 1.0, (1,), np.float32), lambda _: 1e-3,
         log_std_init=-1.0, lstm_hidden_size=H, enable_critic_lstm=True)
+    if not double:
+        return policy
     # SB3's preprocess_obs casts a Box observation to float32 before the features extractor
     # (a flatten): the tests' observations are float32 numbers, so the extractor casting
     # back to float64 leaves the same function, in float64
@@ -138,7 +145,7 @@ def test_the_lstm_cell_is_torch_nn_lstm() -> None:
     out, (h, c) = layer(t(xs), (t(h0)[None], t(c0)[None]))
     params = {"params": {name: jnp.asarray(getattr(layer, f"{name}_l0").detach().numpy())
                          for name in ("weight_ih", "weight_hh", "bias_ih", "bias_hh")}}
-    cell = lstm.LSTMCell(5)
+    cell = lstm.LSTMCell(5, jnp.float64)
     (h_, c_), outs = lstm.unroll(cell, params, (jnp.asarray(h0), jnp.asarray(c0)),
                                  jnp.asarray(xs), jnp.zeros((9, 4), dtype=bool))
     assert np.max(np.abs(np.asarray(outs) - out.detach().numpy())) < 1e-14
@@ -165,7 +172,8 @@ def test_the_cell_is_cleared_at_an_episode_start_and_initialised_as_torch() -> N
 @pytest.fixture(scope="module")
 def orbit() -> tuple[RecurrentPPO, Any]:
     env, params = jt.make_env(ORBIT, "recurrent")
-    return recurrent_algorithm(env, params)[0], env.observation_space(params).shape[0]
+    return (recurrent_algorithm(env, params, network_dtype="float64")[0],
+            env.observation_space(params).shape[0])
 
 
 def test_our_parameters_have_sb3_contribs_shapes(orbit: tuple[RecurrentPPO, Any]) -> None:
@@ -228,6 +236,69 @@ def test_step_by_step_gives_sb3_contribs_deterministic_actions(
                                               jnp.asarray(starts[step]))
         assert np.max(np.abs(np.asarray(ours) - theirs)) < 1e-12
         assert np.max(np.abs(np.asarray(ours_carry[1]) - theirs_state[1][0].numpy())) < 1e-12
+
+
+def test_in_float32_the_networks_are_sb3_contribs_float32_policy() -> None:
+    """The shipped networks (float32 parameters, carries and arithmetic) against sb3-contrib's
+    policy as it is built (float32), its parameters copied: values, log-probabilities and
+    entropies over sequences with episode starts, and the deterministic actions step by step,
+    to float32's round-off (a few units of 1e-7 of each quantity's scale, through 12 LSTM
+    steps); the values come out in float64, the rewards' dtype."""
+    env, params = jt.make_env(ORBIT, "recurrent")
+    algo, _ = recurrent_algorithm(env, params)
+    n_obs = env.observation_space(params).shape[0]
+    ts = algo.init_state(jax.random.PRNGKey(0))
+    networks = jax.tree.leaves((ts.actor_ts.params, ts.actor_ts.opt_state, ts.critic_ts.params,
+                                ts.critic_ts.opt_state, ts.actor_carry, ts.critic_carry))
+    assert {np.asarray(x).dtype for x in networks
+            if np.issubdtype(np.asarray(x).dtype, np.floating)} == {np.dtype(np.float32)}
+    policy = torch_policy(n_obs, seed=11, double=False)
+    actor, critic = jax.tree.map(lambda x: x.astype(jnp.float32), ours_from_torch(policy))
+    rng = np.random.default_rng(12)
+    obs, starts, actor0, critic0 = sequences(rng, 12, 3, n_obs)
+    actor0, critic0 = jax.tree.map(lambda x: x.astype(jnp.float32), (actor0, critic0))
+    actions = rng.normal(size=(12, 3, 1)) * 0.5
+
+    def f32(x: Any) -> Any:
+        return torch.tensor(np.array(x, dtype=np.float32))
+
+    def states(carry: lstm.Carry) -> tuple[Any, Any]:
+        return f32(carry[0])[None].contiguous(), f32(carry[1])[None].contiguous()
+
+    def sm(x: Any) -> Any:
+        x = np.swapaxes(np.asarray(x), 0, 1)
+        return f32(x.reshape((-1, *x.shape[2:])))
+
+    with torch.no_grad():
+        values, log_prob, entropy = policy.evaluate_actions(
+            sm(obs), sm(actions), RNNStates(pi=states(actor0), vf=states(critic0)), sm(starts))
+    _, latent = lstm.unroll(algo.cell, actor["lstm"], actor0, jnp.asarray(obs),
+                            jnp.asarray(starts))
+    ours_lp, ours_ent = algo.actor.apply(actor["head"], latent.reshape(36, H),
+                                         jnp.asarray(actions, jnp.float32).reshape(36, 1),
+                                         method="log_prob_entropy")
+    _, latent_v = lstm.unroll(algo.cell, critic["lstm"], critic0, jnp.asarray(obs),
+                              jnp.asarray(starts))
+    ours_v = algo.critic.apply(critic["head"], latent_v.reshape(36, H))
+    assert ours_lp.dtype == jnp.float32 and ours_v.dtype == jnp.float64
+
+    def close(ours: Any, theirs: Any) -> None:
+        ours = np.swapaxes(np.asarray(ours, dtype=float).reshape(12, 3), 0, 1).reshape(-1)
+        theirs = theirs.numpy().astype(float).reshape(-1)
+        assert np.max(np.abs(ours - theirs)) < 2e-6 * max(1.0, np.max(np.abs(theirs)))
+
+    close(ours_lp, log_prob)
+    close(ours_v, values)
+    assert np.max(np.abs(np.asarray(ours_ent) - entropy.numpy())) < 2e-6
+    carry, theirs_state = algo.policy_carry(3), (torch.zeros(1, 3, H),) * 2
+    for step in range(12):
+        with torch.no_grad():
+            theirs, theirs_state = policy._predict(f32(obs[step]), lstm_states=theirs_state,
+                                                   episode_starts=f32(starts[step]),
+                                                   deterministic=True)
+        carry, ours = algo.policy_action(actor, carry, jnp.asarray(obs[step]),
+                                         jnp.asarray(starts[step]))
+        assert np.max(np.abs(np.asarray(ours) - np.clip(theirs.numpy(), -1, 1))) < 2e-6
 
 
 def sb3_loss(policy: Any, algo: RecurrentPPO, batch: dict[str, Any]) -> Any:
@@ -333,7 +404,8 @@ def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
     normalisation, so the stored reward is the plant's plus the bootstrap, computable here."""
     env, params = Ticker(), TickerParams()
     algo, _ = recurrent_algorithm(env, params, num_envs=2, num_steps=7, num_minibatches=1,
-                                  normalize_observations=False, normalize_rewards=False)
+                                  normalize_observations=False, normalize_rewards=False,
+                                  network_dtype="float64")
     ts = algo.init_state(jax.random.PRNGKey(3))
     policy = torch_policy(2, seed=9)
     actor, critic = ours_from_torch(policy)

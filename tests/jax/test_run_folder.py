@@ -175,6 +175,40 @@ def test_a_folder_without_the_keywords_reads_them_as_empty(run: tuple[jt.JaxTrai
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_folder_from_before_network_dtype_loads_with_float64_networks(
+        true_run: tuple[jt.JaxTraining, Path], tmp_path: Path) -> None:
+    """A folder saved before ``Recipe.network_dtype`` was recorded was trained with float64
+    arithmetic on float32 kernels (flax's default): it loads with float64 networks, each saved
+    leaf widened exactly, its training state too (it can still be continued); a float64 leaf
+    in a float32 run's policy file is refused, naming it."""
+    from flax import serialization
+
+    result, saved = true_run
+    folder = copy_of(saved, tmp_path)
+    data = json.loads((folder / "results.json").read_text())
+    del data["recipe"]["network_dtype"]
+    (folder / "results.json").write_text(json.dumps(data))
+    for path in folder.glob("seed*/policy.msgpack"):
+        raw = serialization.msgpack_restore(path.read_bytes())
+        raw["run"]["recipe"] = json.dumps(data["recipe"], sort_keys=True)
+        path.write_bytes(serialization.msgpack_serialize(raw))
+    loaded = jt.load(folder)
+    assert loaded.recipe.network_dtype == "float64" and loaded.resumable
+    for a, b in zip(policy_leaves(loaded), policy_leaves(result), strict=True):
+        assert a.dtype == np.float64
+        np.testing.assert_array_equal(a, b.astype(np.float64))
+    assert np.all(np.isfinite(play_in_numpy_env(loaded, 1)))
+
+    spoiled = copy_of(saved, tmp_path / "spoiled")
+    path = spoiled / "seed0" / "policy.msgpack"
+    raw = serialization.msgpack_restore(path.read_bytes())
+    kernel = raw["actor"]["params"]["action_mean"]["kernel"]
+    raw["actor"]["params"]["action_mean"]["kernel"] = np.asarray(kernel, dtype=np.float64)
+    path.write_bytes(serialization.msgpack_serialize(raw))
+    with pytest.raises(ValueError, match=r"action_mean/kernel is float64.* has float32"):
+        jt.load(spoiled)
+
+
 # ---------------------------------------------------------------------------- the CLI
 def test_evaluate_plays_every_seed_of_a_jax_folder(run: tuple[jt.JaxTraining, Path],
                                                    played: list[list[float]],
