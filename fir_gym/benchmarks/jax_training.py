@@ -164,7 +164,7 @@ def jax_ppo_rate(steps: int, seeds: int = 1, cache: str | None = None, free: boo
         ts = jax.lax.fori_loop(0, rec.iterations, lambda _, ts: algo.train_iteration(ts), ts)
         return ts.actor_ts.params
 
-    program = jax.jit(jax.vmap(one))
+    program = jax.jit(jt.over_seeds(one))
     # the initial states outside the program, as fir_gym.jax.train.train does (its QR
     # factorisations, batched inside a program, can deadlock XLA's CPU pool)
     # (one call for the three runs: each call's states are of a class of their own)

@@ -5,7 +5,8 @@ The JAX twin of ``fir-gym train`` (:func:`fir_gym.training.train`) for the plant
 instance) with the shipped recipe of ``fir_gym/training/hyperparams/ppo.yml``
 (:func:`recipe` reads it through :meth:`fir_gym.training.RunConfig.settings`, so
 ``steps``, ``n_envs`` and ``algo_kwargs`` override it as they do for stable-baselines3),
-trained for all seeds at once: ``jax.jit(jax.vmap(one_seed))(initial_states)``, one compiled
+trained for all seeds at once: ``jax.jit(jax.vmap(one_seed))(initial_states)``
+(:func:`over_seeds`; a single seed unbatched), one compiled
 program (each seed's initial state made beforehand: :func:`initial_states`).
 JAX's persistent compilation cache (:func:`enable_compilation_cache`; the folder
 ``$FIR_GYM_JAX_CACHE``, else ``$XDG_CACHE_HOME/fir-gym/jax``, else ``~/.cache/fir-gym/jax``)
@@ -331,6 +332,23 @@ def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_e
     return one_seed
 
 
+def over_seeds(one_seed: Any) -> Any:
+    """``one_seed`` over stacked seeds (a leading axis of every leaf): ``jax.vmap``, except
+    that a single seed runs unbatched and gets its axis back — XLA's CPU backend compiles the
+    networks' matrix products of a batch of one as batched products, measured 12-15 % slower
+    per PPO iteration than the plain ones on the development machine (docs/jax.md). The same
+    seed alone and among others agrees to round-off, not to the bit, as before."""
+    batched = jax.vmap(one_seed)
+
+    def run(states: Any) -> Any:
+        if jax.tree.leaves(states)[0].shape[0] == 1:
+            out = one_seed(jax.tree.map(lambda x: x[0], states))
+            return jax.tree.map(lambda x: jnp.asarray(x)[None], out)
+        return batched(states)
+
+    return run
+
+
 def initial_states(algo: SB3LikePPO, seeds: list[int]) -> Any:
     """Each seed's initial train state (``algo.init_state(PRNGKey(seed))``), stacked along a
     leading axis — computed one seed at a time, outside the vmapped training program: the
@@ -468,7 +486,7 @@ def _run(algo: SB3LikePPO, rec: Recipe, initial: Any, settings: dict[str, Any]
     """Compile and run :func:`training_program` (``rec.iterations`` iterations) from the
     stacked states ``initial``: ``(train state, curves [seed][checkpoint], final returns
     [seed][episode], time compiled, time done)``."""
-    program = jax.jit(jax.vmap(training_program(algo, rec, **settings)))
+    program = jax.jit(over_seeds(training_program(algo, rec, **settings)))
     compiled = program.lower(initial).compile()
     compiled_at = time.perf_counter()
     ts, curve, final = jax.block_until_ready(compiled(initial))
