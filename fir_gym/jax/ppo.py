@@ -4,8 +4,10 @@
 ``(obs, state, reward, done, info)``; gymnax 1.0 returns ``terminated`` and ``truncated``
 apart. :class:`Gymnax0` adapts the environment (``done = terminated | truncated``).
 :class:`SB3LikePPO` subclasses ``rejax.PPO`` where it differs from stable-baselines3's
-PPO in a way that changes learning: one gradient-norm clip (``optax.clip_by_global_norm``;
-rejax clips each gradient *element* with ``optax.clip``), Adam's ``eps = 1e-5`` (SB3's),
+PPO in a way that changes learning: one gradient-norm clip over the actor's and the critic's
+gradients together, as SB3's ``clip_grad_norm_`` over all the policy's parameters
+(:func:`clip_jointly`; rejax clips each gradient *element* with ``optax.clip``), Adam's
+``eps = 1e-5`` (SB3's),
 an initial ``log_std`` of the recipe's ``log_std_init`` (rejax: 0), SB3's orthogonal
 initialisation (gains √2, 0.01 for the mean, 1 for the value; rejax: flax's LeCun normal,
 which starts the mean action far from 0), the value loss
@@ -21,10 +23,11 @@ observation normalised as ``VecNormalize.step_wait`` does (with the statistics a
 step's update); gymnax 1.0's ``info["final_observation"]``, ``info["truncated"]`` and
 ``info["terminated"]`` give the same here.
 
-**What still differs from stable-baselines3** (:data:`UNMATCHED`): separate Adam states and
-separate gradient-norm clips for the actor and the critic (SB3: one optimiser over one
-summed loss; with separate networks only the clip differs); the minibatches must divide the
-rollout (``n_steps · n_envs / batch_size`` an integer: SB3 allows a short last one). Two
+**What still differs from stable-baselines3** (:data:`UNMATCHED`): nothing in what is
+trained. The actor and the critic keep separate Adam states, which is SB3's one Adam over
+both networks (Adam is elementwise and the networks share no parameter), with the one clip
+above; the recipe refuses minibatches that do not divide the rollout (``n_steps · n_envs /
+batch_size`` an integer: SB3 allows a short last one). Two
 differences of rejax's normalisation are matched too: the running discounted return behind
 the reward statistics restarts one step after an episode's last (``VecNormalize.
 _update_reward``, then ``returns[dones] = 0``; rejax's ``update_rew_rms``, ``r + (1 − done)
@@ -56,11 +59,9 @@ from rejax.algos.mixins import RewardRMSState, RMSState, update_rms  # noqa: E40
 from rejax.algos.ppo import Trajectory  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
-#: the parts of the recipe not matched (the module docstring says why)
-UNMATCHED = (
-    "actor and critic: separate Adam states and separate global-norm clips (SB3: one "
-    "optimiser, one clip over both)",
-)
+#: the parts of the recipe not matched (the module docstring says why): none since the
+#: gradient-norm clip is one over both networks (:func:`clip_jointly`)
+UNMATCHED: tuple[str, ...] = ()
 #: stable-baselines3's Adam epsilon
 ADAM_EPS = 1e-5
 #: the networks' arithmetic (``Recipe.network_dtype``): float32 by default, as PyTorch's
@@ -175,10 +176,9 @@ class SB3LikePPO(PPO):
                                  self.critic.init(rng_critic, obs))
 
     def train_states(self, actor_params: Any, critic_params: Any) -> dict[str, Any]:
-        """The actor's and the critic's train states: each its own Adam (SB3's ``eps``) after
-        a global-norm clip of its gradient."""
-        tx = optax.chain(optax.clip_by_global_norm(self.max_grad_norm),
-                         optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS))
+        """The actor's and the critic's train states: each its own Adam (SB3's ``eps``), given
+        the gradients :meth:`update` has clipped together."""
+        tx = optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS)
         return {"actor_ts": TrainState.create(apply_fn=(), params=actor_params, tx=tx),
                 "critic_ts": TrainState.create(apply_fn=(), params=critic_params, tx=tx)}
 
@@ -295,24 +295,31 @@ class SB3LikePPO(PPO):
         reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
         return ts, next_obs, env_state, reward, done
 
-    def update_actor(self, ts: Any, batch: Any) -> Any:
-        def loss(params: Any) -> Any:
-            log_prob, entropy = self.actor.apply(params, batch.trajectories.obs,
-                                                 batch.trajectories.action,
-                                                 method="log_prob_entropy")
-            return actor_loss(self, log_prob, entropy, batch.trajectories.log_prob,
-                              batch.advantages)
+    def update(self, ts: Any, batch: Any) -> Any:
+        """One minibatch's step, as SB3's ``PPO.train``: the gradients of the policy loss
+        (:meth:`actor_objective`) and of the value loss (:meth:`critic_objective`) — SB3's
+        one summed loss, whose gradient splits so over the two networks — clipped together
+        (:func:`clip_jointly`), then each network's Adam step."""
+        actor_grads = jax.grad(self.actor_objective)(ts.actor_ts.params, batch)
+        critic_grads = jax.grad(self.critic_objective)(ts.critic_ts.params, batch)
+        actor_grads, critic_grads = clip_jointly((actor_grads, critic_grads),
+                                                 self.max_grad_norm)
+        return ts.replace(actor_ts=ts.actor_ts.apply_gradients(grads=actor_grads),
+                          critic_ts=ts.critic_ts.apply_gradients(grads=critic_grads))
 
-        grads = jax.grad(loss)(ts.actor_ts.params)
-        return ts.replace(actor_ts=ts.actor_ts.apply_gradients(grads=grads))
+    def actor_objective(self, params: Any, batch: Any) -> Any:
+        """SB3's policy loss on ``batch`` (:func:`actor_loss`)."""
+        log_prob, entropy = self.actor.apply(params, batch.trajectories.obs,
+                                             batch.trajectories.action,
+                                             method="log_prob_entropy")
+        return actor_loss(self, log_prob, entropy, batch.trajectories.log_prob,
+                          batch.advantages)
 
-    def update_critic(self, ts: Any, batch: Any) -> Any:
-        def loss(params: Any) -> Any:        # SB3: vf_coef * mse, no value clipping
-            value = self.critic.apply(params, batch.trajectories.obs)
-            return self.vf_coef * jnp.mean(jnp.square(value - batch.targets))
-
-        grads = jax.grad(loss)(ts.critic_ts.params)
-        return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
+    def critic_objective(self, params: Any, batch: Any) -> Any:
+        """SB3's value loss on ``batch``: ``vf_coef`` times the mean squared error, no value
+        clipping."""
+        value = self.critic.apply(params, batch.trajectories.obs)
+        return self.vf_coef * jnp.mean(jnp.square(value - batch.targets))
 
     # the deterministic policy, as the evaluations play it (a recurrent one carries a state)
     def policy_carry(self, batch: int) -> Any:
@@ -324,6 +331,15 @@ class SB3LikePPO(PPO):
         """``(carry, actions)``: the Gaussian's mean clipped to the action box for the
         (normalised) observations ``obs (batch, n)``; ``start`` marks an episode's first step."""
         return carry, self.actor.apply(actor_params, obs, method="mean_action")
+
+
+def clip_jointly(grads: Any, max_norm: float) -> Any:
+    """``grads`` (any tree: here the actor's and the critic's) scaled by one factor so that
+    their global norm is at most ``max_norm``, as ``torch.nn.utils.clip_grad_norm_`` does over
+    all of SB3's policy's parameters: ``min(1, max_norm / (‖g‖ + 1e-6))``."""
+    norm = optax.global_norm(grads)
+    scale = jnp.minimum(1.0, max_norm / (norm + 1e-6))
+    return jax.tree.map(lambda g: (g * scale).astype(g.dtype), grads)
 
 
 def actor_loss(algo: Any, log_prob: Any, entropy: Any, old_log_prob: Any, advantages: Any

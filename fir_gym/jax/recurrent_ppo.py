@@ -207,31 +207,22 @@ class RecurrentPPO(SB3LikePPO):
             time_major(batch.targets), jax.tree.map(env_major, batch.actor_carry),
             jax.tree.map(env_major, batch.critic_carry))
 
-    def update_actor(self, ts: Any, batch: Any) -> Any:
+    def actor_objective(self, params: Any, batch: Any) -> Any:
+        """SB3's policy loss over the minibatch's sequences, replayed through the actor's
+        LSTM from the carries the rollout began with."""
         t = batch.trajectories
+        _, latent = lstm.unroll(self.cell, params["lstm"], batch.actor_carry, t.obs, t.start)
+        log_prob, entropy = self.actor.apply(params["head"], _flat(latent), _flat(t.action),
+                                             method="log_prob_entropy")
+        return actor_loss(self, log_prob, entropy, _flat(t.log_prob), _flat(batch.advantages))
 
-        def loss(params: Any) -> Any:
-            _, latent = lstm.unroll(self.cell, params["lstm"], batch.actor_carry, t.obs,
-                                    t.start)
-            log_prob, entropy = self.actor.apply(params["head"], _flat(latent),
-                                                 _flat(t.action), method="log_prob_entropy")
-            return actor_loss(self, log_prob, entropy, _flat(t.log_prob),
-                              _flat(batch.advantages))
-
-        grads = jax.grad(loss)(ts.actor_ts.params)
-        return ts.replace(actor_ts=ts.actor_ts.apply_gradients(grads=grads))
-
-    def update_critic(self, ts: Any, batch: Any) -> Any:
+    def critic_objective(self, params: Any, batch: Any) -> Any:
+        """``vf_coef`` times the values' mean squared error over the minibatch's sequences,
+        replayed through the critic's LSTM."""
         t = batch.trajectories
-
-        def loss(params: Any) -> Any:
-            _, latent = lstm.unroll(self.cell, params["lstm"], batch.critic_carry, t.obs,
-                                    t.start)
-            value = self.critic.apply(params["head"], _flat(latent))
-            return self.vf_coef * jnp.mean(jnp.square(value - _flat(batch.targets)))
-
-        grads = jax.grad(loss)(ts.critic_ts.params)
-        return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
+        _, latent = lstm.unroll(self.cell, params["lstm"], batch.critic_carry, t.obs, t.start)
+        value = self.critic.apply(params["head"], _flat(latent))
+        return self.vf_coef * jnp.mean(jnp.square(value - _flat(batch.targets)))
 
 
 def _flat(x: Any) -> Any:

@@ -32,6 +32,7 @@ import torch
 from jax_runs import ORBIT
 from rejax.algos.ppo import AdvantageMinibatch, Trajectory
 from stable_baselines3.common.policies import ActorCriticPolicy
+from update_gradients import update_gradients
 
 from fir_gym.jax import train as jt
 from fir_gym.training.run import RunConfig
@@ -130,7 +131,8 @@ def test_float32_is_the_default_and_every_network_leaf_is_float32() -> None:
 def test_the_gradients_are_those_of_sb3s_ppo_loss() -> None:
     """``PPO.train``'s loss on one minibatch (advantages normalised with ``th.std``, the clipped
     surrogate, ``ent_coef`` times the entropy, ``vf_coef`` times the values' mean squared
-    error), differentiated by torch, against the gradients our update hands to Adam."""
+    error), differentiated by torch and clipped by ``clip_grad_norm_`` over all the policy's
+    parameters, against the gradients our update hands to Adam."""
     algo = algorithm("float64").replace(ent_coef=0.01)
     policy = sb3_policy(True, seed=3)
     actor, critic = ours_from_sb3(dict(policy.named_parameters()), jnp.float64)
@@ -150,29 +152,16 @@ def test_the_gradients_are_those_of_sb3s_ppo_loss() -> None:
     loss = (surrogate - algo.ent_coef * entropy.mean()
             + algo.vf_coef * torch.mean((d(targets) - values.flatten()) ** 2))
     loss.backward()
+    # PPO.train's clip over all the policy's parameters at once (active here: the norm is
+    # above max_grad_norm, so both networks' gradients shrink by one factor)
+    norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), algo.max_grad_norm)
+    assert float(norm) > algo.max_grad_norm
     theirs = ours_from_sb3({k: v.grad for k, v in policy.named_parameters()}, jnp.float64)
-
-    captured: dict[str, Any] = {}
-
-    class Capture:                        # a train state that records the gradients given
-        def __init__(self, name: str, params: Any) -> None:
-            self.name, self.params = name, params
-
-        def apply_gradients(self, grads: Any) -> Capture:
-            captured[self.name] = grads
-            return self
-
-    class TS:
-        def __init__(self) -> None:
-            self.actor_ts, self.critic_ts = Capture("actor", actor), Capture("critic", critic)
-
-        def replace(self, **kw: Any) -> TS:
-            return self
 
     batch = AdvantageMinibatch(
         Trajectory(jnp.asarray(obs), jnp.asarray(actions), jnp.asarray(old_log_prob), None,
                    None, None), jnp.asarray(advantages), jnp.asarray(targets))
-    algo.update(TS(), batch)
+    captured = update_gradients(algo, actor, critic, batch)
     worst = 0.0
     for name, want in zip(("actor", "critic"), theirs, strict=True):
         for got, leaf in zip(jax.tree.leaves(captured[name]), jax.tree.leaves(want),

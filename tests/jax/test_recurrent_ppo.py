@@ -43,6 +43,7 @@ from jax_runs import ORBIT
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from sb3_contrib.common.recurrent.type_aliases import RNNStates
 from ticker import Ticker, TickerParams
+from update_gradients import update_gradients
 
 from fir_gym.jax import lstm
 from fir_gym.jax import train as jt
@@ -329,26 +330,13 @@ def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO,
              "log_prob": rng.normal(size=(12, 3)) * 0.2 - 1.0,
              "advantages": rng.normal(size=(12, 3)), "targets": rng.normal(size=(12, 3))}
     sb3_loss(policy, algo, batch).backward()
+    # PPO.train's clip over all the policy's parameters at once (active here: the norm is
+    # above max_grad_norm, so both networks' gradients shrink by one factor)
+    norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), algo.max_grad_norm)
+    assert float(norm) > algo.max_grad_norm
     theirs_actor, theirs_critic = ours_from_torch(
         type("Grads", (), {"state_dict": lambda self: {
             k: v.grad for k, v in policy.named_parameters()}})())
-
-    captured: dict[str, Any] = {}
-
-    class Capture:                        # a train state that records the gradients given
-        def __init__(self, name: str, params: Any) -> None:
-            self.name, self.params = name, params
-
-        def apply_gradients(self, grads: Any) -> Capture:
-            captured[self.name] = grads
-            return self
-
-    class TS:
-        def __init__(self) -> None:
-            self.actor_ts, self.critic_ts = Capture("actor", actor), Capture("critic", critic)
-
-        def replace(self, **kw: Any) -> TS:
-            return self
 
     from fir_gym.jax.recurrent_ppo import RecurrentTrajectory, SequenceMinibatch
     mb = SequenceMinibatch(
@@ -356,7 +344,7 @@ def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO,
                             jnp.asarray(batch["log_prob"]), None, None, None,
                             jnp.asarray(starts)),
         jnp.asarray(batch["advantages"]), jnp.asarray(batch["targets"]), actor0, critic0)
-    algo.update(TS(), mb)
+    captured = update_gradients(algo, actor, critic, mb)
     worst = 0.0
     for name, theirs in (("actor", theirs_actor), ("critic", theirs_critic)):
         for ours_leaf, theirs_leaf in zip(jax.tree.leaves(captured[name]),
