@@ -8,21 +8,25 @@ the controller benchmark's plan (the plant's episode settings, the kind's option
 training steps) through :func:`make_vec_env`, a ``VecEnv`` over the vmapped, jitted gymnax
 ``reset``/``step`` (same-step auto-reset; the terminal observation and
 ``TimeLimit.truncated`` in the infos, as SB3's ``DummyVecEnv`` gives them), under
-``VecNormalize``; then evaluates each seed as the SB3 benchmark does (the numpy env, episodes
+``VecNormalize``; then saves each seed as a run folder of ``fir-gym train`` and evaluates it
+with the SB3 benchmark's own :func:`fir_gym.training.evaluate` (the numpy env, episodes
 ``reset(seed=10000 + i)``, the deterministic policy on the final normalisation statistics).
 If it scores as the SB3 backend, the JAX PPO differs; if as the JAX backend, the env does.
 
 A measurement, not a test::
 
-    python scripts/sb3_on_jax_env.py --kind ekf --seeds 0,1,2,3,4
+    python scripts/sb3_on_jax_env.py --kind ekf --seeds 0,1,2,3,4 [--out DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import tempfile
 import time
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -99,6 +103,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--env", default="fir_gym/Orbit-v0")
     parser.add_argument("--kind", default="ekf")
     parser.add_argument("--seeds", default="0,1,2,3,4", help="comma-separated seeds")
+    parser.add_argument("--out", default=None,
+                        help="keep the run folders here (default: a temporary folder)")
     args = parser.parse_args(argv)
     warnings.filterwarnings("ignore")
     import torch
@@ -106,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from fir_gym.jax.benchmark import benchmark_plan
-    from fir_gym.training.evaluation import make_eval_env
+    from fir_gym.training.evaluation import evaluate
     from fir_gym.training.run import RunConfig
     from fir_gym.training.stats import iqm
 
@@ -116,33 +122,27 @@ def main(argv: list[str] | None = None) -> None:
                        kind_kwargs=job["kind_kwargs"])
     settings = config.settings()
     per_seed = []
-    for seed in (int(s) for s in args.seeds.split(",")):
-        start = time.perf_counter()
-        venv = VecNormalize(make_vec_env(args.env, args.kind, job, settings["n_envs"], seed),
-                            gamma=settings["algo_kwargs"].get("gamma", 0.99),
-                            **settings["normalize"])
-        model = PPO(settings["policy"], venv, seed=seed, device="cpu", verbose=0,
-                    **settings["algo_kwargs"])
-        model.learn(job["steps"])
-        venv.training, venv.norm_reward = False, False
-        env = make_eval_env(config)
-        returns = []
-        for episode in range(job["episodes"]):
-            obs, _ = env.reset(seed=10_000 + episode)
-            total, done = 0.0, False
-            while not done:
-                action, _ = model.predict(venv.normalize_obs(np.asarray(obs)[None]),
-                                          deterministic=True)
-                obs, reward, terminated, truncated, _ = env.step(np.asarray(action)[0])
-                total, done = total + float(reward), terminated or truncated
-            returns.append(total)
-        env.close()
-        per_seed.append(float(np.mean(returns)))
-        print(json.dumps({"seed": seed, "mean_return": round(per_seed[-1], 1),
-                          "seconds": round(time.perf_counter() - start)}), flush=True)
+    folder = contextlib.nullcontext(args.out) if args.out else tempfile.TemporaryDirectory()
+    with folder as root:
+        for seed in (int(s) for s in args.seeds.split(",")):
+            start = time.perf_counter()
+            venv = VecNormalize(make_vec_env(args.env, args.kind, job, settings["n_envs"],
+                                             seed),
+                                gamma=settings["algo_kwargs"].get("gamma", 0.99),
+                                **settings["normalize"])
+            model = PPO(settings["policy"], venv, seed=seed, device="cpu", verbose=0,
+                        **settings["algo_kwargs"])
+            model.learn(job["steps"])
+            run = Path(root) / f"{args.kind}-seed{seed}"       # fir-gym train's run folder
+            run.mkdir(parents=True, exist_ok=True)
+            model.save(run / "model.zip")
+            venv.save(str(run / "vecnormalize.pkl"))
+            (run / "run.json").write_text(config.to_json())
+            per_seed.append(float(np.mean(evaluate(run, episodes=job["episodes"]).returns)))
+            print(json.dumps({"seed": seed, "mean_return": round(per_seed[-1], 1),
+                              "seconds": round(time.perf_counter() - start)}), flush=True)
     print(json.dumps({"env": args.env, "kind": args.kind, "per_seed": per_seed,
                       "iqm": iqm(per_seed)}))
-
 
 if __name__ == "__main__":
     main()

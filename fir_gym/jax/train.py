@@ -566,7 +566,7 @@ def save(result: JaxTraining, out: str | Path) -> Path:
             state = {"actor": ts.actor_ts.params, "critic": ts.critic_ts.params,
                      "obs_rms": ts.obs_rms_state}
             one = jax.tree.map(lambda x, i=i: np.asarray(x)[i], state)
-            one["run"] = _identity(result.env_id, result.kind, seed, result.recipe,
+            one["run"] = _identity(result.env_id, result.kind, seed, asdict(result.recipe),
                                    result.env_kwargs, result.kind_kwargs)
             (out / f"seed{seed}").mkdir(exist_ok=True)
             (out / f"seed{seed}" / "policy.msgpack").write_bytes(serialization.to_bytes(one))
@@ -646,17 +646,16 @@ def saved_recipe(written: dict[str, Any]) -> dict[str, Any]:
     return {"network_dtype": "float64", **written}
 
 
-def _identity(env_id: str, kind: str, seed: int, rec: Recipe | dict[str, Any],
+def _identity(env_id: str, kind: str, seed: int, recipe: dict[str, Any],
               env_kwargs: dict[str, Any], kind_kwargs: dict[str, Any]) -> dict[str, str]:
     """What a saved policy belongs to, as strings (msgpack keeps them): the plant, the kind,
-    the seed and, as JSON, the recipe (as the run wrote it) and the plant's and the kind's
-    keywords — so that :func:`load` tells a policy file of another run even where the
-    networks' shapes agree."""
+    the seed and, as JSON, the recipe as ``results.json`` holds it (:class:`Recipe`'s fields)
+    and the plant's and the kind's keywords — so that :func:`load` tells a policy file of
+    another run even where the networks' shapes agree."""
     def text(value: Any) -> str:
         return json.dumps(value, sort_keys=True)
 
-    written = asdict(rec) if isinstance(rec, Recipe) else rec
-    return {"env_id": env_id, "kind": kind, "seed": str(seed), "recipe": text(written),
+    return {"env_id": env_id, "kind": kind, "seed": str(seed), "recipe": text(recipe),
             "env_kwargs": text(env_kwargs), "kind_kwargs": text(kind_kwargs)}
 
 
@@ -675,7 +674,7 @@ def _read_policy(path: Path, template: dict[str, Any], identity: dict[str, str],
     are not checked) equal to ``identity``, then leaf by leaf the same names and shapes as
     ``template`` and dtypes that widen exactly to the template's (:func:`_widened`: a
     folder's float32 kernels into float64 networks) before flax restores it into the
-    template's structure."""
+    template's structure, widened (:func:`_widened_tree`)."""
     from flax import serialization, traverse_util
 
     try:
@@ -702,9 +701,7 @@ def _read_policy(path: Path, template: dict[str, Any], identity: dict[str, str],
             raise ValueError(f"{path} is not a policy of {run}: {name} is {got.dtype}"
                              f"{list(got.shape)} where the run's policy has "
                              f"{np.asarray(leaf).dtype}{list(np.shape(leaf))}")
-    restored = serialization.from_state_dict(template, raw)
-    return jax.tree.map(lambda x, leaf: _widened(np.asarray(x), np.asarray(leaf).dtype),
-                        restored, template)
+    return _widened_tree(serialization.from_state_dict(template, raw), template)
 
 
 def _widened(x: np.ndarray, dtype: Any) -> np.ndarray | None:
@@ -716,6 +713,17 @@ def _widened(x: np.ndarray, dtype: Any) -> np.ndarray | None:
             and np.finfo(x.dtype).bits < np.finfo(dtype).bits:
         return x.astype(dtype)
     return None
+
+
+def _widened_tree(tree: Any, template: Any) -> Any:
+    """``tree`` with every leaf :func:`_widened` to the dtype of ``template``'s leaf in its
+    place, or ``None`` where one cannot be."""
+    leaves, structure = jax.tree.flatten(tree)
+    widened = [_widened(np.asarray(x), np.asarray(t).dtype)
+               for x, t in zip(leaves, jax.tree.leaves(template), strict=True)]
+    if any(x is None for x in widened):
+        return None
+    return jax.tree.unflatten(structure, widened)
 
 
 def load(run_dir: str | Path) -> JaxTraining:
@@ -807,13 +815,10 @@ def _read_state(path: Path, template: Any, policies: dict[str, Any]) -> Any:
     except Exception as err:                 # msgpack's and flax's errors have no common base
         raise ValueError(f"{path} is not this run's training state ({type(err).__name__}: "
                          f"{str(err)[:120]})") from None
-    leaves, tree = jax.tree.flatten(whole)
-    widened = [_widened(np.asarray(x), np.asarray(t).dtype)
-               for x, t in zip(leaves, jax.tree.leaves(template), strict=True)]
-    if any(x is None for x in widened):
+    whole = _widened_tree(whole, template)
+    if whole is None:
         raise ValueError(f"{path} is not this run's training state: its dtypes are not the "
                          "run's networks'")
-    whole = jax.tree.unflatten(tree, [jnp.asarray(x) for x in widened])
     mine = {"actor": whole.actor_ts.params, "critic": whole.critic_ts.params,
             "obs_rms": whole.obs_rms_state}
     for a, b in zip(jax.tree.leaves(mine), jax.tree.leaves(policies), strict=True):

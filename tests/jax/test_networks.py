@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import torch
 from jax_runs import ORBIT
 from rejax.algos.ppo import AdvantageMinibatch, Trajectory
+from sb3_in_double import in_double
 from stable_baselines3.common.policies import ActorCriticPolicy
 from update_gradients import update_gradients
 
@@ -56,13 +57,7 @@ def sb3_policy(double: bool, seed: int = 0) -> Any:
                                **kwargs)
     with torch.no_grad():                 # a log_std away from its initial value counts too
         policy.log_std.add_(0.3)
-    if not double:
-        return policy
-    # SB3's preprocess_obs casts a Box observation to float32 before the features extractor
-    # (a flatten): the tests' observations are float32 numbers, so the extractor casting
-    # back to float64 leaves the same function, in float64
-    policy.features_extractor.forward = lambda obs: torch.flatten(obs, 1).double()
-    return policy.double()
+    return in_double(policy) if double else policy
 
 
 def ours_from_sb3(named: dict[str, Any], dtype: Any) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -42,6 +42,7 @@ from gymnax.environments import environment, spaces
 from jax_runs import ORBIT
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from sb3_contrib.common.recurrent.type_aliases import RNNStates
+from sb3_in_double import in_double
 from ticker import Ticker, TickerParams
 from update_gradients import update_gradients
 
@@ -70,13 +71,7 @@ def torch_policy(n_obs: int, seed: int = 0, double: bool = True) -> Any:
         gym.spaces.Box(-np.inf, np.inf, (n_obs,), np.float64),
         gym.spaces.Box(-1.0, 1.0, (1,), np.float32), lambda _: 1e-3,
         log_std_init=-1.0, lstm_hidden_size=H, enable_critic_lstm=True)
-    if not double:
-        return policy
-    # SB3's preprocess_obs casts a Box observation to float32 before the features extractor
-    # (a flatten): the tests' observations are float32 numbers, so the extractor casting
-    # back to float64 leaves the same function, in float64
-    policy.features_extractor.forward = lambda obs: torch.flatten(obs, 1).double()
-    return policy.double()
+    return in_double(policy) if double else policy
 
 
 def t(x: Any) -> Any:
