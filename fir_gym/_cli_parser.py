@@ -134,7 +134,9 @@ def _add_runner_options(p: argparse.ArgumentParser, what: str, jax: str = "") ->
                    help=f"where the {what} run (default: serial, this process; dask needs "
                         'the cluster extra: pip install ".[cluster]")' + jax)
     p.add_argument("--jobs", type=positive_int, default=None,
-                   help="worker processes for joblib/dask (default: the CPUs)")
+                   help="worker processes for joblib/dask (default: the CPUs)" + (
+                       "; jax: rows trained side by side in N processes (default: 1, this "
+                       "process)" if jax else ""))
     p.add_argument("--scheduler", default=None,
                    help="address of a Dask scheduler (with --backend dask; default: a local "
                         "cluster)")
@@ -281,7 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
                         jax="; jax: the learned grid trained with fir_gym.jax (its kinds, "
                             "every regime; every seed of a plant, kind and regime in one "
                             "compiled program; the jax extra: pip install "
-                            '".[jax]"), evaluated in the numpy envs; the LQG grid serial')
+                            '".[jax]"), evaluated in the numpy envs; both grids in --jobs N '
+                            'local processes (default: 1, this process)')
 
     p = command("watch", "record one episode as a GIF or MP4, the estimate drawn over the plant",
                 description="Record one episode with the estimate (and its 2σ region, "

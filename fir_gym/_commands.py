@@ -399,15 +399,15 @@ def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
     from ._extras import require
 
     require("jax", "gymnax", "rejax")                  # a missing extra: its one line
-    if args.jobs or args.scheduler:
-        raise ValueError("--backend jax runs every seed of a plant and kind in one program in "
-                         "this process: it takes no --jobs or --scheduler")
+    if args.scheduler:
+        raise ValueError("--backend jax runs its rows in this process or, with --jobs N, in N "
+                         "local worker processes: it takes no --scheduler")
     from .jax.benchmark import markdown, run_benchmark
 
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()] if args.kinds else None
     report = run_benchmark(args.out, quick=args.quick, seeds=args.seeds, plants=plants,
                            kinds=kinds, compare_with=args.compare_with,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, jobs=args.jobs)
     print(markdown(report))
     print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
     return 0
@@ -429,9 +429,9 @@ def cmd_robustness(args: argparse.Namespace) -> int:
                   if args.conditions else None)
     check_selection(plants, conditions)              # a bad name fails before any work
     jax = args.backend == "jax"
-    if jax and (args.jobs or args.scheduler):
-        raise ValueError("--backend jax trains every seed of a plant, kind and regime in one "
-                         "program in this process: it takes no --jobs or --scheduler")
+    if jax and args.scheduler:
+        raise ValueError("--backend jax runs in this process or, with --jobs N, in N local "
+                         "worker processes: it takes no --scheduler")
     if not args.lqg_only:
         from ._extras import require
 
@@ -439,8 +439,8 @@ def cmd_robustness(args: argparse.Namespace) -> int:
             require("jax", "gymnax", "rejax")
         else:
             require("stable_baselines3", "sb3_contrib")
-    if jax:
-        args.backend = "serial"                      # the LQG grid's runner
+    if jax:                                          # both grids' runner: --jobs processes
+        args.backend = "joblib" if args.jobs and args.jobs > 1 else "serial"
     with _runner(args) as runner:
         report = run_benchmark(out, quick=args.quick, runner=runner, plants=plants,
                                conditions=conditions, seeds=args.seeds,

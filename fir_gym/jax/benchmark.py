@@ -85,43 +85,89 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
 
 def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = None,
                   plants: list[str] | None = None, kinds: list[str] | None = None,
-                  compare_with: str | Path | None = None, progress: bool = True
-                  ) -> dict[str, Any]:
+                  compare_with: str | Path | None = None, progress: bool = True,
+                  jobs: int | None = None) -> dict[str, Any]:
     """Train every job of :func:`benchmark_plan`, save each run folder under ``out``, and
-    write ``out/results.json`` and ``out/BENCHMARK.md``; the report dict."""
-    import sys
+    write ``out/results.json`` and ``out/BENCHMARK.md``; the report dict.
 
+    ``jobs``: worker processes (default: none, every row in this process). With ``jobs``
+    > 1 the rows are handed to a pool of that many processes (joblib's, as the SB3
+    backend's ``--backend joblib``), the costliest first (:func:`row_cost`), each row still
+    every seed in one compiled program: on a CPU one XLA program of these small networks
+    keeps about one core busy and vmapping seeds does not multiply its rate, so the cores
+    are used by running rows side by side. The rows and their numbers are the same as in
+    one process — every row is its own program and its own seeds (``tests/jax/
+    test_benchmark.py``); only the times differ."""
     sb3 = _sb3_tables(compare_with) if compare_with else None
     out = Path(out)
-    jobs = benchmark_plan(quick=quick, seeds=seeds, plants=plants, kinds=kinds)
-    start = time.perf_counter()
-    rows = []
+    plan = benchmark_plan(quick=quick, seeds=seeds, plants=plants, kinds=kinds)
     classical = chosen_plants(plants) if kinds is None or "lqg" in kinds else []
-    for i, job in enumerate(jobs):
-        if progress:
-            print(f"[{i + 1}/{len(jobs)}] {job['env_id']} {job['kind']}: {job['seeds']} "
-                  f"seed(s) x {job['steps']} steps", file=sys.stderr, flush=True)
-        result = train(job["env_id"], job["kind"], job["seeds"], steps=job["steps"],
-                       env_kwargs=job["env_kwargs"], kind_kwargs=job["kind_kwargs"],
-                       episodes=job["episodes"])
-        save(result, out / job["env_id"].split("/")[-1] / job["kind"])
-        rows.append({"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
-                     "episode_returns": result.final_returns,
-                     "numpy_returns": play_in_numpy_env(result, job["episodes"]),
-                     "compile_seconds": result.compile_seconds,
-                     "train_seconds": result.train_seconds,
-                     "steps_trained": result.steps_trained,
-                     "steps_per_second": result.steps_trained * len(result.seeds)
-                     / result.train_seconds})
-    for env_id in classical:
-        rows.append(lqg_row(env_id, QUICK["episodes"] if quick else EPISODES))
+    episodes = QUICK["episodes"] if quick else EPISODES
+    tasks = [*[("learned", job, out) for job in plan],
+             *[("lqg", {"env_id": env_id, "kind": "lqg", "episodes": episodes}, out)
+               for env_id in classical]]
+    start = time.perf_counter()
+    rows = _run_rows(tasks, jobs, progress)
     tables = summarise(rows, sb3)
     report = {"backend": "jax", "quick": quick, "seconds": time.perf_counter() - start,
+              "jobs": jobs or 1,
               "compare_with": str(compare_with) if compare_with else None, "tables": tables}
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "BENCHMARK.md").write_text(markdown(report) + "\n")
     return report
+
+
+def row_cost(task: tuple[str, dict[str, Any], Path]) -> float:
+    """A row's expected cost, to hand the costliest rows out first: its env-steps times
+    the seeds, five times for ``recurrent`` (RecurrentPPO's two LSTMs: Orbit-v0's
+    benchmark rows trained in 65 s against about 12 s for each PPO row, docs/jax.md), a
+    token for the LQG row (nothing trained)."""
+    what, job, _ = task
+    if what == "lqg":
+        return 1.0
+    return job["steps"] * job["seeds"] * (5.0 if job["kind"] == "recurrent" else 1.0)
+
+
+def run_row(task: tuple[str, dict[str, Any], Path]) -> dict[str, Any]:
+    """One row of the report: a learned job trained (:func:`fir_gym.jax.train.train`),
+    saved under ``out/<plant>/<kind>`` and played in the numpy env
+    (:func:`play_in_numpy_env`), or the plant's :func:`lqg_row`. A module-level function of
+    one argument, for the worker pool."""
+    what, job, out = task
+    if what == "lqg":
+        return lqg_row(job["env_id"], job["episodes"])
+    result = train(job["env_id"], job["kind"], job["seeds"], steps=job["steps"],
+                   env_kwargs=job["env_kwargs"], kind_kwargs=job["kind_kwargs"],
+                   episodes=job["episodes"])
+    save(result, Path(out) / job["env_id"].split("/")[-1] / job["kind"])
+    return {"env_id": job["env_id"], "kind": job["kind"], "seeds": result.seeds,
+            "episode_returns": result.final_returns,
+            "numpy_returns": play_in_numpy_env(result, job["episodes"]),
+            "compile_seconds": result.compile_seconds,
+            "train_seconds": result.train_seconds,
+            "steps_trained": result.steps_trained,
+            "steps_per_second": result.steps_trained * len(result.seeds)
+            / result.train_seconds}
+
+
+def _run_rows(tasks: list[tuple[str, dict[str, Any], Path]], jobs: int | None,
+              progress: bool) -> list[dict[str, Any]]:
+    """:func:`run_row` of every task, in ``tasks``' order: in this process, or handed to
+    ``jobs`` worker processes the costliest first (:func:`row_cost`; so that no worker is
+    left with a long row at the end, as the robustness benchmark orders its tasks)."""
+    from fir_gym.scenarios.runner import Runner
+
+    order = sorted(range(len(tasks)), key=lambda i: -row_cost(tasks[i]))
+    parallel = bool(jobs and jobs > 1)
+    with Runner("joblib" if parallel else "serial", jobs=jobs if parallel else None,
+                progress=progress) as runner:
+        done = runner.map(run_row, [tasks[i] for i in order],
+                          desc="benchmark-controllers (jax)")
+    rows: list[dict[str, Any]] = [{} for _ in tasks]
+    for i, row in zip(order, done, strict=True):
+        rows[i] = row
+    return rows
 
 
 def lqg_row(env_id: str, episodes: int, seed: int = EVAL_SEED) -> dict[str, Any]:

@@ -105,16 +105,17 @@ def run_group(group: Sequence[LearnedTask]) -> list[dict[str, Any]]:
     return out
 
 
-def run_groups(tasks: Sequence[LearnedTask], progress: bool = True
+def run_groups(tasks: Sequence[LearnedTask], runner: Any = None
                ) -> tuple[list[dict[str, Any]], list[str]]:
-    """Every task the JAX backend trains, group by group in this process (one program uses
-    the machine's cores): the results, and one sentence per (plant, kind, regime) left out."""
-    from tqdm import tqdm
+    """Every task the JAX backend trains, group by group (one compiled program each) on
+    ``runner`` (a :class:`fir_gym.scenarios.runner.Runner`; default: this process): the
+    results, and one sentence per (plant, kind, regime) left out. The groups keep the
+    tasks' order (:func:`fir_gym.robustness.benchmark.learned_tasks`: the costliest first),
+    so a pool of workers is handed the recurrent groups first."""
+    from fir_gym.scenarios.runner import SERIAL
 
     kept = [t for t in tasks if refusal(t) is None]
     skipped = sorted({f"{t.env_id.split('/')[-1]} {t.kind} [{t.regime}]: {refusal(t)}"
                       for t in tasks if refusal(t) is not None})
-    results: list[dict[str, Any]] = []
-    for group in tqdm(groups(kept), desc="learned grid (jax)", disable=not progress):
-        results += run_group(group)
-    return results, skipped
+    done = (runner or SERIAL).map(run_group, groups(kept), desc="learned grid (jax)")
+    return [result for group in done for result in group], skipped

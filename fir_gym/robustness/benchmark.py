@@ -136,11 +136,13 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     """Run the grids and write ``OUT/results.json``, ``OUT/REPORT.md`` and the figures.
     ``learned_backend="jax"`` trains the learned grid with :mod:`fir_gym.jax`
     (:mod:`fir_gym.jax.robustness`: what it cannot train is left out and listed in the
-    report)."""
+    report). ``runner`` (a :class:`fir_gym.scenarios.runner.Runner`) runs both grids' tasks
+    — on the JAX backend each (plant, kind, regime) group, every seed in one program;
+    default: this process, with a progress bar when ``progress``."""
     if learned_backend not in ("sb3", "jax"):
         raise ValueError(f"learned_backend must be 'sb3' or 'jax'; got {learned_backend!r}")
     from fir_gym.code_version import code_version
-    from fir_gym.scenarios.runner import SERIAL
+    from fir_gym.scenarios.runner import Runner
 
     from .report import answers, details, markdown, save_figures, tables_of
 
@@ -148,7 +150,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     chosen_plants, chosen_conditions = check_selection(plants, conditions)
     if quick and plants is None:
         chosen_plants = [p for p in QUICK.plants if p in chosen_plants]
-    runner = runner or SERIAL
+    runner = runner or Runner("serial", progress=progress)
     load_start = load_average()
     start = time.perf_counter()
     lqg = lqg_tasks(chosen_plants, chosen_conditions, quick=quick)
@@ -164,7 +166,7 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
         if learned_backend == "jax":
             from fir_gym.jax.robustness import run_groups
 
-            learned_results, learned_skipped = run_groups(tasks, progress=progress)
+            learned_results, learned_skipped = run_groups(tasks, runner)
         else:
             learned_results = runner.map(run_task, tasks, desc="learned grid")
         learned_seconds = time.perf_counter() - start

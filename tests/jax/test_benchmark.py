@@ -72,6 +72,26 @@ def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
                                 progress=False)
 
 
+def test_rows_on_two_worker_processes_are_the_rows_of_one(tmp_path: Path) -> None:
+    """``jobs=2`` hands the rows to two processes, the costliest first: the report has the
+    same rows in the plan's order, with the same numbers to the bit (each row is its own
+    compiled program and seeds, whichever process runs it)."""
+    kinds = ["true", "recurrent", "lqg"]          # recurrent: the costliest, handed out first
+    assert benchmark.row_cost(("learned", {"kind": "recurrent", "steps": 10, "seeds": 1},
+                               tmp_path)) > benchmark.row_cost(
+        ("learned", {"kind": "true", "steps": 10, "seeds": 1}, tmp_path))
+    one, two = (benchmark.run_benchmark(tmp_path / str(jobs), quick=True, seeds=1,
+                                        plants=["fir_gym/Orbit-v0"], kinds=kinds,
+                                        progress=False, jobs=jobs) for jobs in (1, 2))
+    assert (one["jobs"], two["jobs"]) == (1, 2)
+    rows_one, rows_two = (r["tables"]["fir_gym/Orbit-v0"] for r in (one, two))
+    assert [r["kind"] for r in rows_two] == [r["kind"] for r in rows_one] == kinds
+    for a, b in zip(rows_one, rows_two, strict=True):
+        assert a["numpy_returns"] == b["numpy_returns"]
+        assert a["episode_returns"] == b["episode_returns"]
+    assert (tmp_path / "2" / "Orbit-v0" / "recurrent" / "results.json").is_file()
+
+
 def test_the_lqg_row_is_the_sb3_benchmarks_evaluation(tmp_path: Path) -> None:
     """The classical row: the SB3 benchmark's LQG job (``run_job``: its configuration,
     evaluated on the same episodes) gives the same returns; no JAX column, nothing timed."""

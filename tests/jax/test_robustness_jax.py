@@ -97,6 +97,27 @@ def test_the_randomised_regimes_train_on_their_condition(tmp_path: Path) -> None
     assert recorded["env_kwargs"]["sensor_faults"] == {"dropout": 0.3}
 
 
+def test_groups_on_two_worker_processes_give_the_records_of_one(tmp_path: Path) -> None:
+    """``run_groups`` on a two-process runner (``--backend jax --jobs 2``): the same
+    results in the same order as in this process, every return to the bit."""
+    from fir_gym.jax.robustness import run_groups
+    from fir_gym.scenarios.runner import Runner
+
+    def tasks(folder: Path) -> list[LearnedTask]:
+        return [_task(folder, kind, "nominal", seed) for kind in ("true", "ekf")
+                for seed in (0, 1)]
+
+    here, _ = run_groups(tasks(tmp_path / "here"))
+    with Runner("joblib", jobs=2) as runner:
+        there, _ = run_groups(tasks(tmp_path / "there"), runner)
+
+    def returns(results: list[dict]) -> list[tuple[str, int, str, list[float]]]:
+        return [(r["task"]["kind"], r["task"]["seed"], r["task"]["condition"], r["returns"])
+                for result in results for r in result["records"]]
+
+    assert returns(there) == returns(here) and len(here) == 4
+
+
 def test_the_quick_benchmark_runs_every_task(tmp_path: Path) -> None:
     report = run_benchmark(tmp_path, quick=True, plants=[ORBIT], conditions=["dropout"],
                            learned_backend="jax", progress=False)
