@@ -16,7 +16,8 @@ start of an episode the carry is cleared before the step, as sb3-contrib's
 ``_process_sequence`` multiplies it by ``1 − episode_start``.
 
 :func:`step` is one step for a batch, :func:`unroll` a sequence (time first) with the clearing
-at each episode start — what training replays.
+at each episode start, :func:`replay` a sequence that also takes stored carries where
+sb3-contrib's minibatches begin their sequences — what training replays.
 """
 
 from __future__ import annotations
@@ -82,3 +83,25 @@ def unroll(cell: LSTMCell, params: Any, carry: Carry, xs: Any, starts: Any) -> t
         return carry, carry[0]
 
     return jax.lax.scan(one, carry, (xs, starts))
+
+
+def replay(cell: LSTMCell, params: Any, stored: Carry, xs: Any, starts: Any, begins: Any
+           ) -> Any:
+    """:func:`unroll` whose carry is replaced by ``stored`` where ``begins`` is set: rows of
+    sb3-contrib's minibatch sequences, each begun from the LSTM states the rollout stored at
+    its first step (``RecurrentRolloutBuffer._get_samples``' ``lstm_states``). ``stored (T,
+    batch, H)`` each is the carry before each step as the rollout had it (a constant: no
+    gradient flows through it to earlier steps), ``xs (T, batch, n)``, ``starts`` and
+    ``begins (T, batch)``. A row begins from its first stored carry; where an episode starts
+    the carry is cleared after the replacement, as ``_process_sequence`` multiplies the
+    stored state by ``1 − episode_start``. Returns the outputs ``(T, batch, H)``."""
+    def one(carry: Carry, inputs: tuple[Any, Any, Any, Any]) -> tuple[Carry, Any]:
+        stored_now, x, start, begin = inputs
+        carry = (jnp.where(begin[:, None], stored_now[0], carry[0]),
+                 jnp.where(begin[:, None], stored_now[1], carry[1]))
+        carry = step(cell, params, carry, x, start)
+        return carry, carry[0]
+
+    first = (stored[0][0], stored[1][0])
+    _, outputs = jax.lax.scan(one, first, (stored, xs, starts, begins))
+    return outputs

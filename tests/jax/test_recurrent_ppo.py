@@ -7,8 +7,12 @@ Oracles that cannot share its bugs:
   log-probabilities, entropies and values over sequences crossing episode starts, step by step
   (the rollout, ``predict``) and as whole sequences (``evaluate_actions``, what the update
   replays), and the same gradients of SB3's PPO loss (torch's autograd through its LSTM);
-* the rollout replayed by that torch policy: each stored value and log-probability, the
-  episode-start flags, and the bootstrap of an episode cut by its time limit;
+* the rollout replayed by that torch policy: each stored value, log-probability and LSTM
+  state, the episode-start flags, and the bootstrap of an episode cut by its time limit;
+* sb3-contrib's own ``RecurrentRolloutBuffer``, filled and its split index chosen: each of our
+  minibatches holds its minibatch's samples, and our update's gradients are those of
+  ``RecurrentPPO.train``'s masked loss on it (torch's autograd through its padded sequences
+  begun from the stored states, then ``clip_grad_norm_``);
 * a task only memory solves (:class:`Cue`): the recurrent PPO learns it, the feed-forward PPO
   on the same observations cannot.
 
@@ -40,6 +44,7 @@ import torch
 from flax import struct
 from gymnax.environments import environment, spaces
 from jax_runs import ORBIT
+from sb3_contrib.common.recurrent.buffers import RecurrentRolloutBuffer
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from sb3_contrib.common.recurrent.type_aliases import RNNStates
 from sb3_in_double import in_double
@@ -48,7 +53,12 @@ from update_gradients import update_gradients
 
 from fir_gym.jax import lstm
 from fir_gym.jax import train as jt
-from fir_gym.jax.recurrent_ppo import RecurrentPPO
+from fir_gym.jax.recurrent_ppo import (
+    RecurrentPPO,
+    RecurrentTrajectory,
+    Rollout,
+    SequenceMinibatch,
+)
 
 H = 64                       # the shipped recipe's lstm_hidden_size
 
@@ -313,6 +323,26 @@ def sb3_loss(policy: Any, algo: RecurrentPPO, batch: dict[str, Any]) -> Any:
     return surrogate - algo.ent_coef * entropy.mean() + algo.vf_coef * value_loss
 
 
+def torch_gradients(policy: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The torch policy's gradients in our layout: ``(actor, critic)``."""
+    return ours_from_torch(type("Grads", (), {"state_dict": lambda self: {
+        k: v.grad for k, v in policy.named_parameters()}})())
+
+
+def gradient_difference(captured: dict[str, Any], theirs_actor: Any, theirs_critic: Any
+                        ) -> float:
+    """The largest difference of our captured gradients from torch's, relative to each
+    parameter's largest gradient (at least 1)."""
+    worst = 0.0
+    for name, theirs in (("actor", theirs_actor), ("critic", theirs_critic)):
+        for ours_leaf, theirs_leaf in zip(jax.tree.leaves(captured[name]),
+                                          jax.tree.leaves(theirs), strict=True):
+            scale = max(1.0, float(np.max(np.abs(theirs_leaf))))
+            worst = max(worst, float(np.max(np.abs(np.asarray(ours_leaf) - theirs_leaf)))
+                        / scale)
+    return worst
+
+
 def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO, Any]) -> None:
     algo, n_obs = orbit
     algo = algo.replace(ent_coef=0.01)              # the entropy term counts too
@@ -329,62 +359,193 @@ def test_the_gradients_are_those_of_sb3_contribs_loss(orbit: tuple[RecurrentPPO,
     # above max_grad_norm, so both networks' gradients shrink by one factor)
     norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), algo.max_grad_norm)
     assert float(norm) > algo.max_grad_norm
-    theirs_actor, theirs_critic = ours_from_torch(
-        type("Grads", (), {"state_dict": lambda self: {
-            k: v.grad for k, v in policy.named_parameters()}})())
+    theirs_actor, theirs_critic = torch_gradients(policy)
 
-    from fir_gym.jax.recurrent_ppo import RecurrentTrajectory, SequenceMinibatch
+    # whole sequences: every sample in the minibatch, each row begun at step 0 from the
+    # carry stored there; the carries stored at later steps must not count (noise here)
+    def stored(first: lstm.Carry) -> lstm.Carry:
+        return tuple(jnp.asarray(rng.normal(size=(12, 3, H))).at[0].set(part)
+                     for part in first)
+
     mb = SequenceMinibatch(
         RecurrentTrajectory(jnp.asarray(obs), jnp.asarray(batch["action"]),
                             jnp.asarray(batch["log_prob"]), None, None, None,
-                            jnp.asarray(starts)),
-        jnp.asarray(batch["advantages"]), jnp.asarray(batch["targets"]), actor0, critic0)
+                            jnp.asarray(starts), stored(actor0), stored(critic0)),
+        jnp.asarray(batch["advantages"]), jnp.asarray(batch["targets"]),
+        jnp.ones((12, 3), dtype=bool), jnp.zeros((12, 3), dtype=bool).at[0].set(True))
     captured = update_gradients(algo, actor, critic, mb)
-    worst = 0.0
-    for name, theirs in (("actor", theirs_actor), ("critic", theirs_critic)):
-        for ours_leaf, theirs_leaf in zip(jax.tree.leaves(captured[name]),
-                                          jax.tree.leaves(theirs), strict=True):
-            scale = max(1.0, float(np.max(np.abs(theirs_leaf))))
-            worst = max(worst, float(np.max(np.abs(np.asarray(ours_leaf) - theirs_leaf)))
-                        / scale)
+    worst = gradient_difference(captured, theirs_actor, theirs_critic)
     assert worst < 1e-12, worst
 
 
-def test_minibatches_are_whole_envs_with_their_own_first_carries(
-        orbit: tuple[RecurrentPPO, Any]) -> None:
-    """Every env's sequence lands whole in exactly one minibatch, beside the carries its
-    rollout began with and its own advantages and targets."""
-    from fir_gym.jax.recurrent_ppo import RecurrentTrajectory, SequenceMinibatch
+# ---------------------------------------------------------------------------- the minibatches
+BUFFER_STEPS, BUFFER_ENVS = 8, 4          # T, E; batch_size = 2 T: k = 2, two minibatches
+#: split indices: 0; one inside env 1 (t0 = 5); one whose first slice wraps from the last env
+#: to env 0 (env 3 from t0 = 3, env 0 whole, env 1 before 3); one at an env's step 0 that
+#: wraps (env 3 whole, env 0 whole: the third row empty)
+SPLITS = (0, 13, 27, 24)
 
-    algo, _ = orbit
-    steps, envs = 5, algo.num_envs
-    tag = np.broadcast_to(np.arange(envs, dtype=float), (steps, envs))   # value = env index
-    column = jnp.asarray(tag)
-    traj = RecurrentTrajectory(column[..., None], column[..., None], column, column, column,
-                               column > 99, column > 99)
-    carry = (jnp.tile(jnp.arange(envs, dtype=float)[:, None], (1, H)),
-             -jnp.tile(jnp.arange(envs, dtype=float)[:, None], (1, H)))
-    batch = SequenceMinibatch(traj, column + 0.5, column + 0.25, carry, carry)
-    split = algo.split_envs(batch, jax.random.PRNGKey(4))
-    per = envs // algo.num_minibatches
-    assert split.trajectories.obs.shape == (algo.num_minibatches, steps, per, 1)
-    seen = []
-    for m in range(algo.num_minibatches):
-        who = np.asarray(split.trajectories.log_prob[m])           # (T, per)
-        assert (who == who[0]).all()                               # whole sequences
-        seen += list(who[0])
-        for got, offset in ((split.advantages[m], 0.5), (split.targets[m], 0.25)):
-            np.testing.assert_array_equal(np.asarray(got), who + offset)
-        for h, c in (split.actor_carry, split.critic_carry):          # (M, per, H) each
-            np.testing.assert_array_equal(np.asarray(h[m])[:, 0], who[0])
-            np.testing.assert_array_equal(np.asarray(c[m])[:, 0], -who[0])
-    assert sorted(seen) == list(range(envs)) and seen != list(range(envs))   # shuffled
+
+def filled_buffer(n_obs: int, rng: np.random.Generator
+                  ) -> tuple[RecurrentRolloutBuffer, dict[str, np.ndarray]]:
+    """A real ``RecurrentRolloutBuffer`` of ``T = 8`` steps of ``E = 4`` envs, filled through
+    its ``add`` with float32-representable numbers: episode starts scattered (at the rollout's
+    first step, inside envs, at the split indices' slice starts), a distinct stored LSTM state
+    per step and env, random advantages and returns. Also returns the same rollout time first
+    (``(T, E, ...)``), in float64."""
+    steps, envs = BUFFER_STEPS, BUFFER_ENVS
+
+    def f32(*shape: int, scale: float = 1.0, shift: float = 0.0) -> np.ndarray:
+        return (rng.normal(size=shape) * scale + shift).astype(np.float32).astype(float)
+
+    data = {"obs": f32(steps, envs, n_obs, scale=2.0), "action": f32(steps, envs, 1, scale=0.5),
+            "log_prob": f32(steps, envs, scale=0.2, shift=-1.0), "value": f32(steps, envs),
+            "advantages": f32(steps, envs), "targets": f32(steps, envs)}
+    start = rng.random((steps, envs)) < 0.2
+    start[0, 2] = start[4, 1] = start[6, 3] = start[5, 1] = True   # (env 1 at t0 of split 13)
+    start[0, 0] = False                        # env 0's first stored state is not cleared
+    data["start"] = start
+    for name in ("actor_h", "actor_c", "critic_h", "critic_c"):
+        data[name] = f32(steps, envs, H, scale=0.3)
+    buffer = RecurrentRolloutBuffer(
+        steps, gym.spaces.Box(-np.inf, np.inf, (n_obs,), np.float64),
+        gym.spaces.Box(-1.0, 1.0, (1,), np.float32), (steps, 1, envs, H), device="cpu",
+        n_envs=envs)
+    for step in range(steps):
+        def state(name: str, step: int = step) -> Any:
+            return torch.tensor(data[name][step], dtype=torch.float32)[None]
+
+        buffer.add(data["obs"][step], data["action"][step], np.zeros(envs),
+                   data["start"][step].astype(np.float32), t(data["value"][step]),
+                   t(data["log_prob"][step]),
+                   lstm_states=RNNStates(pi=(state("actor_h"), state("actor_c")),
+                                         vf=(state("critic_h"), state("critic_c"))))
+    buffer.advantages[:] = data["advantages"]     # as compute_returns_and_advantage leaves
+    buffer.returns[:] = data["targets"]
+    return buffer, data
+
+
+def our_rollout(data: dict[str, np.ndarray]) -> Rollout:
+    """The buffer's rollout as ours holds it; the reward (unused by the update) tags each
+    sample with its env-major flat index ``e T + t``, the buffer's index."""
+    steps, envs = data["start"].shape
+    tag = np.arange(envs)[None, :] * steps + np.arange(steps)[:, None]
+    a = jnp.asarray
+    trajectories = RecurrentTrajectory(
+        a(data["obs"]), a(data["action"]), a(data["log_prob"]), a(tag.astype(float)),
+        a(data["value"]), a(np.zeros((steps, envs), dtype=bool)), a(data["start"]),
+        (a(data["actor_h"]), a(data["actor_c"])), (a(data["critic_h"]), a(data["critic_c"])))
+    return Rollout(trajectories, a(data["advantages"]), a(data["targets"]))
+
+
+def sb3_contrib_minibatches(buffer: RecurrentRolloutBuffer, split: int, batch_size: int,
+                            monkeypatch: pytest.MonkeyPatch) -> list[tuple[Any, np.ndarray]]:
+    """``buffer.get(batch_size)`` with its ``split_index`` made ``split``: each minibatch's
+    samples and the flat indices ``_get_samples`` was given."""
+    drawn: list[np.ndarray] = []
+    get_samples = buffer._get_samples
+
+    def recorded(batch_inds: np.ndarray, env_change: np.ndarray) -> Any:
+        drawn.append(np.array(batch_inds))
+        return get_samples(batch_inds, env_change)
+
+    def randint(high: int) -> int:
+        assert high == buffer.buffer_size * buffer.n_envs
+        return split
+
+    with monkeypatch.context() as patch:
+        patch.setattr(buffer, "_get_samples", recorded)
+        patch.setattr(np.random, "randint", randint)
+        samples = list(buffer.get(batch_size))
+    return list(zip(samples, drawn, strict=True))
+
+
+def sb3_contrib_train_loss(policy: Any, algo: RecurrentPPO, data: Any) -> Any:
+    """``RecurrentPPO.train``'s loss on one of the buffer's minibatches, its lines (the mask,
+    the advantages normalised over it, the masked means), the buffer's float32 tensors cast to
+    the double policy's float64."""
+    def d(x: Any) -> Any:
+        return x.double()
+
+    mask = data.mask > 1e-8
+    states = RNNStates(pi=tuple(d(x) for x in data.lstm_states.pi),
+                       vf=tuple(d(x) for x in data.lstm_states.vf))
+    values, log_prob, entropy = policy.evaluate_actions(
+        d(data.observations), d(data.actions), states, d(data.episode_starts))
+    values = values.flatten()
+    advantages = d(data.advantages)
+    advantages = (advantages - advantages[mask].mean()) / (advantages[mask].std() + 1e-8)
+    ratio = torch.exp(log_prob - d(data.old_log_prob))
+    policy_loss_1 = advantages * ratio
+    policy_loss_2 = advantages * torch.clamp(ratio, 1 - algo.clip_eps, 1 + algo.clip_eps)
+    policy_loss = -torch.mean(torch.min(policy_loss_1, policy_loss_2)[mask])
+    value_loss = torch.mean(((d(data.returns) - values) ** 2)[mask])
+    entropy_loss = -torch.mean(entropy[mask])
+    return policy_loss + algo.ent_coef * entropy_loss + algo.vf_coef * value_loss
+
+
+@pytest.fixture(scope="module")
+def small() -> tuple[RecurrentPPO, int]:
+    """The recurrent recipe on Orbit-v0 with ``T = 8`` steps of ``E = 4`` envs and two
+    minibatches (``batch_size = 2 T``), float64 networks, the entropy term counted."""
+    env, params = jt.make_env(ORBIT, "recurrent")
+    algo, _ = recurrent_algorithm(env, params, num_envs=BUFFER_ENVS, num_steps=BUFFER_STEPS,
+                                  num_minibatches=2, network_dtype="float64", ent_coef=0.01)
+    return algo, env.observation_space(params).shape[0]
+
+
+@pytest.mark.parametrize("split", SPLITS)
+def test_minibatches_are_sb3_contribs_and_give_its_gradients(
+        small: tuple[RecurrentPPO, int], split: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """sb3-contrib's own ``RecurrentRolloutBuffer``, its split index made ``split``: each of
+    our minibatches of that split holds the buffer's minibatch's samples, the slices cover
+    every sample once, and our update's gradients (after the joint clip) are those of
+    ``RecurrentPPO.train``'s loss on the buffer's minibatch after ``clip_grad_norm_``
+    (torch's autograd through sb3-contrib's padded sequences from the stored states)."""
+    algo, n_obs = small
+    batch_size = BUFFER_ENVS * BUFFER_STEPS // algo.num_minibatches
+    buffer, data = filled_buffer(n_obs, np.random.default_rng(21))
+    rollout = our_rollout(data)
+    policy = torch_policy(n_obs, seed=13)
+    actor, critic = ours_from_torch(policy)
+    theirs = sb3_contrib_minibatches(buffer, split, batch_size, monkeypatch)
+    firsts = np.asarray(algo.slice_starts(split))
+    assert len(theirs) == len(firsts) == algo.num_minibatches
+    covered = []
+    for first, (samples, indices) in zip(firsts, theirs, strict=True):
+        mb = algo.minibatch(rollout, first)
+        ours = np.asarray(mb.trajectories.reward)[np.asarray(mb.mask)]
+        assert sorted(ours) == sorted(indices)                    # the same samples
+        covered += list(ours)
+
+        policy.zero_grad()
+        sb3_contrib_train_loss(policy, algo, samples).backward()
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), algo.max_grad_norm)
+        worst = gradient_difference(update_gradients(algo, actor, critic, mb),
+                                    *torch_gradients(policy))
+        assert worst < 1e-12, (split, first, worst)
+    assert sorted(covered) == list(range(BUFFER_ENVS * BUFFER_STEPS))   # each sample once
+
+
+def test_the_split_index_is_uniform_over_the_samples(small: tuple[RecurrentPPO, int]
+                                                     ) -> None:
+    """One split per epoch, uniform over the ``E T = 32`` samples as ``np.random.randint``:
+    4000 draws, each value's count within 5 standard deviations of 125, every value drawn."""
+    algo, _ = small
+    draws = np.asarray(jax.vmap(algo.split_index)(jax.random.split(jax.random.PRNGKey(0),
+                                                                   4000)))
+    counts = np.bincount(draws, minlength=33)
+    assert counts[32] == 0 and counts[:32].min() > 0
+    expected = 4000 / 32
+    assert np.max(np.abs(counts[:32] - expected)) < 5 * np.sqrt(expected * (1 - 1 / 32))
 
 
 # ---------------------------------------------------------------------------- the rollout
 def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
     """Ticker: three-step episodes cut by the time limit, two envs, seven steps. No
-    normalisation, so the stored reward is the plant's plus the bootstrap, computable here."""
+    normalisation, so the stored reward is the plant's plus the bootstrap, computable here;
+    the stored carries are the torch policy's LSTM states before each step, as
+    ``collect_rollouts`` gives ``RecurrentRolloutBuffer.add`` its ``_last_lstm_states``."""
     env, params = Ticker(), TickerParams()
     algo, _ = recurrent_algorithm(env, params, num_envs=2, num_steps=7, num_minibatches=1,
                                   normalize_observations=False, normalize_rewards=False,
@@ -394,7 +555,8 @@ def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
     actor, critic = ours_from_torch(policy)
     ts = ts.replace(actor_ts=ts.actor_ts.replace(params=actor),
                     critic_ts=ts.critic_ts.replace(params=critic))
-    _, traj, began = jax.jit(algo.collect_trajectories)(ts)
+    _, traj = jax.jit(algo.collect_trajectories)(ts)
+    began = jax.tree.map(lambda x: x[0], (traj.actor_carry, traj.critic_carry))
     assert not any(np.any(np.asarray(x)) for x in jax.tree.leaves(began))   # zeros
     done = np.asarray(traj.done)
     start = np.asarray(traj.start)
@@ -406,6 +568,11 @@ def test_the_rollout_is_what_the_torch_policy_computes_step_by_step() -> None:
     for step in range(7):
         obs = np.asarray(traj.obs[step])
         assert np.allclose(obs[:, 0], x)
+        # the stored carries: the torch policy's LSTM states before this step (not cleared)
+        for ours, theirs in ((traj.actor_carry, states.pi), (traj.critic_carry, states.vf)):
+            for part in (0, 1):
+                assert np.max(np.abs(np.asarray(ours[part][step])
+                                     - theirs[part][0].numpy())) < 1e-12
         with torch.no_grad():
             _, log_prob, _ = policy.evaluate_actions(t(obs), t(traj.action[step]), states,
                                                      t(start[step]))
