@@ -7,14 +7,14 @@ their step (``vmap`` them for a batch):
   ``P⁻ = F P Fᵀ + Q``, symmetrised. The EKF calls it with ``F`` the Jacobian and ``x⁻ =
   f(x, u)`` computed by the plant's model (:func:`ekf_predict`).
 * :func:`kf_update` — :func:`fir_gym.estimators.kalman.kf_update`: the Joseph-form update
-  ``x⁺ = x + K e``, ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` (symmetrised), ``K = P Hᵀ
-  S⁻¹``, ``S = H P Hᵀ + R``, ``e = y − H x``, and the normalised innovation squared ``eᵀ
-  S⁻¹ e``. ``S⁻¹`` comes from its Cholesky factor (:mod:`fir_gym.jax.small_linalg`:
-  unrolled, no LAPACK call, see there why); where ``S`` is not positive definite the
-  factor, and with it ``x⁺``, ``P⁺`` and the NIS, are NaN (the numpy filter's rule: the
-  watch then keeps the last finite estimate and raises ``diverged``). The numpy reference
-  forms the Joseph product from factors (:func:`fir_gym.estimators._kalman_linalg.
-  factored_joseph`); here it is the plain product — the same matrix up to round-off.
+  ``x⁺ = x + K e``, ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ``, ``K = P Hᵀ S⁻¹``, ``S = H P
+  Hᵀ + R``, ``e = y − H x``, and the normalised innovation squared ``eᵀ S⁻¹ e``, in the
+  numpy reference's arithmetic (:func:`fir_gym.estimators.kalman.gain_kernel`): ``S⁻¹`` by
+  :func:`fir_gym.jax.small_linalg.spd_inverse` (unrolled, no LAPACK call, see there why),
+  NaN where ``S`` is not positive definite, and with it ``x⁺``, ``P⁺`` and the NIS (the
+  numpy filter's rule: the watch then keeps the last finite estimate and raises
+  ``diverged``); ``P⁺`` by :func:`factored_joseph`, the Joseph product formed from factors,
+  positive semidefinite by construction.
 * :func:`watch` — :meth:`fir_gym.estimators.base.Estimator._accept` with its defaults: a
   non-finite estimate or covariance is not stored (the last finite one stays), a NIS above
   the ``1 − nis_tail`` χ² quantile (or NaN, for a usable measurement) extends a run, and the
@@ -110,14 +110,25 @@ def kf_update_innovation(x: jax.Array, P: jax.Array, e: jax.Array, H: jax.Array,
                          R: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
     """:func:`kf_update` given the innovation ``e`` (``y − h(x⁻)`` for an EKF, with ``H``
     the Jacobian of ``h`` at ``x⁻``)."""
-    S = symmetrize(H @ P @ H.T + R)
-    L = small_linalg.cholesky(S)                       # NaN where S is not PD
     PHt = P @ H.T
-    K = small_linalg.cho_solve(L, PHt.T).T             # P Hᵀ S⁻¹
-    A = jnp.eye(P.shape[0]) - K @ H
-    P_new = symmetrize(A @ P @ A.T + K @ R @ K.T)
-    w = small_linalg.solve_lower(L, e)                 # L⁻¹ e: nis = |w|²
-    return x + K @ e, P_new, w @ w
+    S = PHt.T @ H.T + R                                # H P Hᵀ + R (P symmetric)
+    W = small_linalg.spd_inverse(S)                    # NaN where S is not PD
+    K = PHt @ W
+    return x + K @ e, factored_joseph(P, H, R, K), e @ (W @ e)
+
+
+def factored_joseph(P: jax.Array, H: jax.Array, R: jax.Array, K: jax.Array) -> jax.Array:
+    """The Joseph-form update ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` from factors, ``P⁺ =
+    M Mᵀ + N Nᵀ`` with ``M = (I − K H) L``, ``N = K L_R``, ``L Lᵀ = P``, ``L_R L_Rᵀ = R``
+    (:func:`fir_gym.estimators._kalman_linalg.factored_joseph`; ``small_linalg.psd_factor``,
+    ``small_linalg.gram``): exactly symmetric and positive semidefinite by construction for
+    any gain. The plain product subtracts terms of the size of ``‖P‖`` to leave ``P⁺`` and
+    leaves the PSD cone where ``P⁺`` is far smaller (``P = 1e12 I``, ``R = 1e-12``; a
+    CarrierMotion-v0 start near its state limit, ``P ≈ 1e290`` against ``R = 10``); the
+    factor carries round-off relative to ``‖P‖^½`` only (docs/architecture.md, covariance
+    updates)."""
+    M = (jnp.eye(P.shape[0], dtype=P.dtype) - K @ H) @ small_linalg.psd_factor(P)
+    return small_linalg.gram(M, K @ small_linalg.psd_factor(R))
 
 
 def watch(old: Belief, x: jax.Array, P: jax.Array, nis: jax.Array, limits: WatchLimits,

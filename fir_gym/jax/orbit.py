@@ -39,10 +39,11 @@ initial-state mean, covariance ``initial_state_cov + 1e-9 diag(max(1, x0²))``
 (:func:`fir_gym.wrappers.estimator_observation.prior_of`). ``reset`` consumes ``y[0]``
 (update only); each step predicts with the applied action — ``x⁻ = f(x̂, u)``, ``P⁻ = F P Fᵀ
 + Q`` with ``F`` the product of the Euler Jacobians — then makes the Joseph-form update with
-``H = [1, 0]``. The numpy reference computes the Joseph form from factors (``gram(M, N)``,
-:func:`fir_gym.estimators._kalman_linalg.factored_joseph`); here it is the plain product
-``A P Aᵀ + K R Kᵀ``, symmetrised — the same matrix up to round-off for the covariances this
-plant produces. The divergence watch is the numpy one with its defaults
+``H = [1, 0]``, its covariance formed from factors as the numpy reference forms it
+(:func:`fir_gym.jax.kalman.factored_joseph`, the twin of
+:func:`fir_gym.estimators._kalman_linalg.factored_joseph`): positive semidefinite by
+construction, where the plain product ``A P Aᵀ + K R Kᵀ`` leaves the cone for a prior far
+above ``R``. The divergence watch is the numpy one with its defaults
 (:meth:`fir_gym.estimators.base.Estimator._accept`): a non-finite estimate or covariance is
 not stored (the last finite one stays), and the sticky ``diverged`` flag is raised by it,
 by ``trace P > max_covariance_trace`` or by ``nis_patience`` consecutive NIS above the
@@ -90,7 +91,7 @@ from ._plant import (
 )
 from ._x64 import require_x64
 from .filter_model import FilterModel
-from .kalman import symmetrize
+from .kalman import factored_joseph, symmetrize
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)
 TRUE_MU = 19.92244165
@@ -309,8 +310,7 @@ def ekf_update(x: jax.Array, P: jax.Array, y: jax.Array, R: jax.Array
     S = P[0, 0] + R
     W = jnp.where(S > 0.0, 1.0 / S, jnp.nan)
     K = P[:, 0] * W
-    A = jnp.eye(2) - jnp.outer(K, jnp.array([1.0, 0.0]))
-    P_new = symmetrize(A @ P @ A.T + R * jnp.outer(K, K))
+    P_new = factored_joseph(P, jnp.array([[1.0, 0.0]]), jnp.reshape(R, (1, 1)), K[:, None])
     return x + K * e, P_new, e * W * e
 
 

@@ -19,6 +19,10 @@ read from the shapes (static), never from the data. Failures are NaN, as in ``jn
 
 * :func:`cholesky` — Cholesky–Banachiewicz (Golub & Van Loan 2013, Alg. 4.2.1), the whole
   factor NaN where ``A`` is not positive definite (:func:`jax.numpy.linalg.cholesky`).
+* :func:`psd_factor` — the semidefinite Cholesky factor (Higham 2002, §10.3), the nearest
+  PSD matrix's factor where ``P`` is indefinite beyond round-off; :func:`gram` — ``Σ M Mᵀ``,
+  exactly symmetric (the numpy references' factored Joseph update,
+  :func:`fir_gym.jax.kalman.factored_joseph`).
 * :func:`solve_lower`, :func:`solve_upper` — forward and back substitution (GvL Alg. 3.1.1,
   3.1.2); :func:`cho_solve` — both with a Cholesky factor (``A⁻¹ B`` for ``A = L Lᵀ``);
   :func:`spd_inverse` — ``A⁻¹`` through them.
@@ -110,6 +114,73 @@ def cholesky(A: jax.Array) -> jax.Array:
                 s = s - L[i][k] * L[j][k]
             L[i][j] = s / ljj
     return jnp.where(ok, _matrix(L), jnp.nan)
+
+
+#: :func:`psd_factor`'s pivot tolerance per unit of ``n |P_jj|``: four units of round-off
+#: (:data:`fir_gym.estimators._kalman_linalg._PIVOT_EPS`, the numpy reference's)
+PIVOT_EPS = 4.0 * float(jnp.finfo(jnp.float64).eps)
+
+
+def psd_factor(P: jax.Array) -> jax.Array:
+    """A factor ``L``, ``L Lᵀ = P``, of a symmetric ``P`` that is positive semidefinite up
+    to round-off — or, where it is not, of its nearest PSD matrix
+    (:func:`fir_gym.estimators._kalman_linalg.psd_factor`, for one matrix).
+
+    The semidefinite Cholesky factor (Higham, *Accuracy and Stability of Numerical
+    Algorithms*, 2002, §10.3), lower triangle read: a pivot at or below ``4 n ε |P_jj|``
+    is taken as zero, with its column. A pivot below ``−4 n ε |P_jj|`` (or NaN) means ``P``
+    is indefinite beyond round-off: the factor is then ``V Λ₊^½`` of ``(P + Pᵀ)/2 = V Λ Vᵀ``
+    (the Jacobi eigenpairs of :func:`eigh`, unsorted: ``L Lᵀ`` does not depend on their
+    order) with the negative eigenvalues set to zero, the nearest PSD matrix in the
+    Frobenius norm (Higham 1988); NaN where ``P`` is not finite. Both are computed and one
+    is selected (shape-static; under ``vmap`` a branch would be computed anyway)."""
+    n = _square(P, "P")
+    a = _entries(P)
+    zero = jnp.zeros((), P.dtype)
+    L = [[zero] * n for _ in range(n)]
+    indefinite = jnp.asarray(False)
+    for j in range(n):
+        tol = PIVOT_EPS * n * jnp.abs(a[j][j])
+        d = a[j][j] - _dot(L[j][:j], L[j][:j]) if j else a[j][j]
+        keep = d > tol
+        indefinite = indefinite | ~(d >= -tol)         # NaN counts as indefinite
+        ljj = _sqrt(jnp.where(keep, d, 1.0))
+        L[j][j] = jnp.where(keep, ljj, zero)
+        for i in range(j + 1, n):
+            s = a[i][j] - _dot(L[i][:j], L[j][:j]) if j else a[i][j]
+            L[i][j] = jnp.where(keep, s / ljj, zero)
+    finite = jnp.all(jnp.isfinite(P))
+    lam, V = _jacobi(jnp.where(finite, P, 0.0))
+    nearest = jnp.where(finite, V * _sqrt(jnp.maximum(lam, 0.0))[None, :], jnp.nan)
+    return jnp.where(indefinite, nearest, _matrix(L))
+
+
+def _dot(u: list[jax.Array], v: list[jax.Array]) -> jax.Array:
+    """``Σ u_k v_k`` in order: the inner product subtracted at once, as the numpy reference's
+    ``einsum`` and matrix products form it."""
+    total = u[0] * v[0]
+    for uk, vk in zip(u[1:], v[1:], strict=True):
+        total = total + uk * vk
+    return total
+
+
+def gram(*factors: jax.Array) -> jax.Array:
+    """``Σ M Mᵀ`` over the factors ``M`` (``n × ·`` each), the upper triangle the lower one's
+    mirror (:func:`fir_gym.estimators._kalman_linalg.gram`): exactly symmetric, and positive
+    semidefinite up to the round-off of forming it. Each entry below the diagonal is one
+    scalar placed twice: XLA's CPU matrix product rounds an entry and its mirror image
+    differently (1 ulp apart, measured), and a loop fusion may recompute a value at each
+    use, so a product mirrored afterwards is not symmetric to the bit."""
+    n = factors[0].shape[0]
+    rows = [_entries(M) for M in factors]
+    g = [[jnp.zeros((), factors[0].dtype)] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i + 1):
+            total = _dot(rows[0][i], rows[0][j])
+            for m in rows[1:]:
+                total = total + _dot(m[i], m[j])
+            g[i][j] = g[j][i] = total
+    return _matrix(g)
 
 
 def solve_lower(L: jax.Array, B: jax.Array) -> jax.Array:
@@ -261,15 +332,15 @@ def _jacobi_rotation(app: jax.Array, apq: jax.Array, aqq: jax.Array
     return c, t * c, t
 
 
-def eigh(A: jax.Array, *, symmetrize_input: bool = True) -> tuple[jax.Array, jax.Array]:
-    """Eigenvalues (ascending) and eigenvectors (columns, orthonormal) of a symmetric ``A``:
-    ``A V = V diag(λ)`` (:func:`jax.numpy.linalg.eigh`). ``symmetrize_input`` takes ``(A +
-    Aᵀ)/2``, else the lower triangle is read (LAPACK's ``UPLO='L'``).
+def _jacobi(A: jax.Array, *, symmetrize_input: bool = True) -> tuple[jax.Array, jax.Array]:
+    """The eigenpairs of a symmetric ``A``, in no particular order (:func:`eigh` sorts them;
+    :func:`psd_factor` needs no order, and a sort is an expensive operation in an XLA CPU
+    program).
 
     The cyclic Jacobi method: :data:`JACOBI_SWEEPS` sweeps over the pairs ``p < q`` in row
     order, each rotation ``A ← Jᵀ A J`` zeroing ``a_pq`` and accumulating ``V ← V J``;
-    eigenvalues are the final diagonal, sorted with their vectors (one rotation is the
-    closed form at ``n = 2``; ``n = 1`` is the identity)."""
+    eigenvalues are the final diagonal (one rotation is the closed form at ``n = 2``;
+    ``n = 1`` is the identity)."""
     n = _square(A)
     As = 0.5 * (A + A.T) if symmetrize_input else jnp.tril(A) + jnp.tril(A, -1).T
     a = _entries(As)
@@ -293,8 +364,15 @@ def eigh(A: jax.Array, *, symmetrize_input: bool = True) -> tuple[jax.Array, jax
                     vkp, vkq = v[k][p], v[k][q]
                     v[k][p] = c * vkp - s * vkq
                     v[k][q] = s * vkp + c * vkq
-    lam = jnp.stack([a[i][i] for i in range(n)])
-    V = _matrix(v)
+    return jnp.stack([a[i][i] for i in range(n)]), _matrix(v)
+
+
+def eigh(A: jax.Array, *, symmetrize_input: bool = True) -> tuple[jax.Array, jax.Array]:
+    """Eigenvalues (ascending) and eigenvectors (columns, orthonormal) of a symmetric ``A``:
+    ``A V = V diag(λ)`` (:func:`jax.numpy.linalg.eigh`). ``symmetrize_input`` takes ``(A +
+    Aᵀ)/2``, else the lower triangle is read (LAPACK's ``UPLO='L'``): :func:`_jacobi`'s
+    eigenpairs, sorted."""
+    lam, V = _jacobi(A, symmetrize_input=symmetrize_input)
     order = jnp.argsort(lam)
     return lam[order], V[:, order]
 

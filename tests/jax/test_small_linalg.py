@@ -275,9 +275,78 @@ def test_batches_under_vmap_and_jit(n: int) -> None:
         assert abs(d[b] / np.linalg.det(M[b]) - 1.0) <= _lu_bound(n, M[b])
 
 
+# ---------------------------------------------------------------------------- PSD factor
+def _semidefinite(rng: np.random.Generator, n: int, cond: float) -> np.ndarray:
+    """A PSD matrix of rank n − 1 (one eigenvalue exactly 0 before rounding)."""
+    Q = _orthogonal(rng, n)
+    lam = np.logspace(0.0, np.log10(cond), n) * 10.0 ** rng.uniform(-3, 3)
+    lam[0] = 0.0
+    A = (Q * lam) @ Q.T
+    return 0.5 * (A + A.T)
+
+
+@pytest.mark.parametrize("n,cond,A", cases(spd))
+def test_psd_factor_of_a_positive_definite_matrix_is_its_cholesky_factor(
+        n: int, cond: float, A: np.ndarray) -> None:
+    """Positive definite: the Cholesky path, lower triangular, ``L Lᵀ = A`` to Cholesky's
+    backward error bound (Higham 2002, Thm 10.3: ``|ΔA| ≤ γ_{n+1} |L||Lᵀ|``, twice for two
+    results), and the numpy reference's factor to the factor's perturbation bound
+    (``‖ΔL‖ ≲ κ(A) ‖ΔA‖ / ‖A‖ · ‖L‖``, Sun 1991)."""
+    from fir_gym.estimators._kalman_linalg import psd_factor
+
+    L = np.asarray(jax.jit(sl.psd_factor)(jnp.asarray(A)))
+    np.testing.assert_array_equal(L, np.tril(L))
+    assert (np.abs(L @ L.T - A) <= 2 * gamma(n + 1) * np.abs(L) @ np.abs(L.T)).all()
+    theirs = psd_factor(A[None])[0]
+    assert np.abs(L - theirs).max() <= 2 * cond * gamma(n + 1) * np.abs(theirs).max()
+
+
+@pytest.mark.parametrize("n,cond,A", [c for c in cases(_semidefinite) if c[0] > 1])
+def test_psd_factor_of_a_singular_psd_matrix_rebuilds_it(n: int, cond: float,
+                                                         A: np.ndarray) -> None:
+    """Positive semidefinite of rank n − 1, which rounding leaves a little either side of
+    the cone: whichever path the pivot test takes (a zero pivot dropped, or the nearest
+    PSD matrix), ``L Lᵀ`` is ``A`` and the numpy reference's ``L Lᵀ`` to both paths'
+    backward error (``n ε ‖A‖`` for the eigen-decomposition, the pivots dropped at ``4 n ε
+    |a_jj|``), with a factor of 2 for two results."""
+    from fir_gym.estimators._kalman_linalg import psd_factor
+
+    L = np.asarray(jax.jit(sl.psd_factor)(jnp.asarray(A)))
+    theirs = psd_factor(A[None])[0]
+    tol = 2 * 8 * n * EPS * np.abs(A).max()
+    assert np.abs(L @ L.T - A).max() <= tol
+    assert np.abs(L @ L.T - theirs @ theirs.T).max() <= tol
+
+
+@pytest.mark.parametrize("n,cond,A", [c for c in cases(symmetric)
+                                      if np.linalg.eigvalsh(c[2]).min() < 0])
+def test_psd_factor_of_an_indefinite_matrix_is_its_nearest_psd_matrix(
+        n: int, cond: float, A: np.ndarray) -> None:
+    """Indefinite beyond round-off: ``L Lᵀ`` is the nearest PSD matrix in the Frobenius norm
+    (Higham 1988: the negative eigenvalues of LAPACK's decomposition set to zero), to the
+    eigen-solvers' accuracy (``n ε ‖A‖`` each)."""
+    lam, V = np.linalg.eigh(A)
+    L = np.asarray(jax.jit(sl.psd_factor)(jnp.asarray(A)))
+    nearest = (V * np.maximum(lam, 0.0)) @ V.T
+    norm = np.abs(lam).max()
+    assert np.abs(L @ L.T - nearest).max() <= 2 * 8 * n * EPS * norm
+
+
+def test_psd_factor_is_nan_where_not_finite_and_gram_is_exactly_symmetric() -> None:
+    A = np.eye(3)
+    A[1, 2] = A[2, 1] = np.nan
+    assert np.isnan(np.asarray(sl.psd_factor(jnp.asarray(A)))).all()
+    rng = np.random.default_rng(3)
+    M, N = rng.normal(size=(4, 4)) * 1e3, rng.normal(size=(4, 2))
+    G = np.asarray(jax.jit(sl.gram)(jnp.asarray(M), jnp.asarray(N)))
+    np.testing.assert_array_equal(G, G.T)
+    np.testing.assert_allclose(G, M @ M.T + N @ N.T, rtol=1e-13, atol=1e-9)
+
+
 def test_no_lapack_in_the_functions_themselves() -> None:
     x = jnp.eye(4)
     for f in (sl.cholesky, sl.spd_inverse, sl.inv, sl.det, sl.eigh, sl.eigvalsh, sl.expm,
+              sl.psd_factor, sl.gram,
               lambda A: sl.solve(A, A[0]), lambda A: sl.cho_solve(A, A)):
         assert "lapack" not in jax.jit(jax.vmap(f)).lower(jnp.stack([x] * 8)).as_text()
 
