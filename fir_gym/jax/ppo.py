@@ -342,14 +342,26 @@ def clip_jointly(grads: Any, max_norm: float) -> Any:
     return jax.tree.map(lambda g: (g * scale).astype(g.dtype), grads)
 
 
-def actor_loss(algo: Any, log_prob: Any, entropy: Any, old_log_prob: Any, advantages: Any
-               ) -> Any:
+def actor_loss(algo: Any, log_prob: Any, entropy: Any, old_log_prob: Any, advantages: Any,
+               mask: Any = None) -> Any:
     """stable-baselines3's PPO policy loss on a minibatch: the clipped surrogate of the
     advantages normalised with the minibatch's mean and *unbiased* standard deviation
     (``th.std``; rejax's ``update_actor`` divides by the biased one), minus ``ent_coef`` times
-    the mean entropy."""
-    ratio = jnp.exp(log_prob - old_log_prob)
-    advantages = (advantages - advantages.mean()) / (jnp.std(advantages, ddof=1) + 1e-8)
+    the mean entropy. With ``mask`` (sb3-contrib's ``RecurrentPPO.train``, whose minibatches
+    are padded sequences) every mean and the normalisation are over the masked samples only
+    (``x[mask]``), and a padded sample's ratio is 1: the exponential of a log-ratio that is
+    masked out could overflow and, times its zero weight, give a NaN gradient."""
+    mask = jnp.ones(advantages.shape, bool) if mask is None else mask
+    n = jnp.sum(mask)
+    mean = masked_mean(advantages, mask)
+    std = jnp.sqrt(jnp.sum(jnp.where(mask, jnp.square(advantages - mean), 0.0)) / (n - 1))
+    advantages = (advantages - mean) / (std + 1e-8)
+    ratio = jnp.exp(jnp.where(mask, log_prob - old_log_prob, 0.0))
     clipped = jnp.clip(ratio, 1 - algo.clip_eps, 1 + algo.clip_eps)
-    surrogate = -jnp.minimum(ratio * advantages, clipped * advantages).mean()
-    return surrogate - algo.ent_coef * entropy.mean()
+    surrogate = -masked_mean(jnp.minimum(ratio * advantages, clipped * advantages), mask)
+    return surrogate - algo.ent_coef * masked_mean(entropy, mask)
+
+
+def masked_mean(x: Any, mask: Any) -> Any:
+    """``th.mean(x[mask])``: the mean of ``x`` over the samples where ``mask`` is set."""
+    return jnp.sum(jnp.where(mask, x, 0.0)) / jnp.sum(mask)

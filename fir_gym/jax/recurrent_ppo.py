@@ -43,9 +43,9 @@ measurements, normalised as ``VecNormalize`` does, through a one-layer LSTM, the
 * **the losses** (``RecurrentPPO.train``'s, masked): the advantages normalised with the mean
   and the unbiased standard deviation over the mask, the clipped surrogate, the entropy and
   the critic's squared error (times ``vf_coef``) as means over the mask
-  (:func:`masked_actor_loss`, :meth:`RecurrentPPO.critic_objective`); the gradients are then
-  clipped together as :class:`~fir_gym.jax.ppo.SB3LikePPO`'s. Nothing of sb3-contrib's
-  training is left unmatched (:data:`UNMATCHED`).
+  (:func:`fir_gym.jax.ppo.actor_loss` with a mask, :meth:`RecurrentPPO.critic_objective`);
+  the gradients are then clipped together as :class:`~fir_gym.jax.ppo.SB3LikePPO`'s.
+  Nothing of sb3-contrib's training is left unmatched (:data:`UNMATCHED`).
 
 Tested against sb3-contrib in ``tests/jax/test_recurrent_ppo.py``: the same parameters give
 the same actions, log-probabilities, entropies and values as ``RecurrentActorCriticPolicy``
@@ -70,7 +70,7 @@ from flax import struct  # noqa: E402
 from rejax.algos.algorithm import register_init  # noqa: E402
 
 from . import lstm  # noqa: E402
-from .ppo import NETWORK_DTYPES, SB3LikePPO  # noqa: E402
+from .ppo import NETWORK_DTYPES, SB3LikePPO, actor_loss, masked_mean  # noqa: E402
 
 #: where this training differs from sb3-contrib's RecurrentPPO (besides SB3LikePPO's own,
 #: none): nothing since the minibatches are ``RecurrentRolloutBuffer.get``'s
@@ -267,15 +267,16 @@ class RecurrentPPO(SB3LikePPO):
                                  rows(rollout.advantages), rows(rollout.targets), mask, begin)
 
     def actor_objective(self, params: Any, batch: Any) -> Any:
-        """``RecurrentPPO.train``'s policy loss on the minibatch (:func:`masked_actor_loss`),
-        its sequences replayed through the actor's LSTM from their stored carries."""
+        """``RecurrentPPO.train``'s policy loss on the minibatch (:func:`fir_gym.jax.ppo.
+        actor_loss` with its mask), its sequences replayed through the actor's LSTM from their
+        stored carries."""
         t = batch.trajectories
         latent = lstm.replay(self.cell, params["lstm"], t.actor_carry, t.obs, t.start,
                              batch.begin)
         log_prob, entropy = self.actor.apply(params["head"], _flat(latent), _flat(t.action),
                                              method="log_prob_entropy")
-        return masked_actor_loss(self, log_prob, entropy, _flat(t.log_prob),
-                                 _flat(batch.advantages), _flat(batch.mask))
+        return actor_loss(self, log_prob, entropy, _flat(t.log_prob), _flat(batch.advantages),
+                          _flat(batch.mask))
 
     def critic_objective(self, params: Any, batch: Any) -> Any:
         """``vf_coef`` times the values' squared error, its mean over the minibatch's mask
@@ -284,31 +285,8 @@ class RecurrentPPO(SB3LikePPO):
         latent = lstm.replay(self.cell, params["lstm"], t.critic_carry, t.obs, t.start,
                              batch.begin)
         value = self.critic.apply(params["head"], _flat(latent))
-        return self.vf_coef * _masked_mean(jnp.square(value - _flat(batch.targets)),
+        return self.vf_coef * masked_mean(jnp.square(value - _flat(batch.targets)),
                                            _flat(batch.mask))
-
-
-def masked_actor_loss(algo: Any, log_prob: Any, entropy: Any, old_log_prob: Any,
-                      advantages: Any, mask: Any) -> Any:
-    """:func:`fir_gym.jax.ppo.actor_loss` over the samples where ``mask`` is set, as
-    ``RecurrentPPO.train`` computes it: the advantages normalised with ``advantages[mask]``'s
-    mean and unbiased standard deviation (``th.std``), the clipped surrogate's and the
-    entropy's means over the mask."""
-    n = jnp.sum(mask)
-    mean = _masked_mean(advantages, mask)
-    std = jnp.sqrt(jnp.sum(jnp.where(mask, jnp.square(advantages - mean), 0.0)) / (n - 1))
-    advantages = (advantages - mean) / (std + 1e-8)
-    # the ratio of a padded sample is 1 (exp of a masked-out log-ratio could overflow and,
-    # times a zero gradient, give NaN)
-    ratio = jnp.exp(jnp.where(mask, log_prob - old_log_prob, 0.0))
-    clipped = jnp.clip(ratio, 1 - algo.clip_eps, 1 + algo.clip_eps)
-    surrogate = -_masked_mean(jnp.minimum(ratio * advantages, clipped * advantages), mask)
-    return surrogate - algo.ent_coef * _masked_mean(entropy, mask)
-
-
-def _masked_mean(x: Any, mask: Any) -> Any:
-    """``th.mean(x[mask])``."""
-    return jnp.sum(jnp.where(mask, x, 0.0)) / jnp.sum(mask)
 
 
 def _flat(x: Any) -> Any:

@@ -159,8 +159,9 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
     Refuses settings it cannot translate: an algorithm keyword it does not know, different
     actor and critic layers, value clipping, advantages not normalised, a minibatch size that
     does not divide the rollout; for ``recurrent`` an LSTM other than sb3-contrib's default
-    arrangement (one layer, the critic's own), and minibatches that are not whole envs'
-    sequences (``num_envs`` divisible by the number of minibatches); a ``network_dtype`` not
+    arrangement (one layer, the critic's own), and a ``batch_size`` that is not a multiple of
+    ``n_steps`` (:mod:`fir_gym.jax.recurrent_ppo`'s minibatches: rows of whole envs'
+    sequences, masked to sb3-contrib's slices); a ``network_dtype`` not
     in :data:`fir_gym.jax.ppo.NETWORK_DTYPES`.
     """
     from fir_gym.training.run import RunConfig
@@ -208,10 +209,10 @@ def recipe(env_id: str = "fir_gym/Orbit-v0", *, steps: int | None = None,
         raise ValueError(f"the jax backend needs batch_size ({batch}) to divide the rollout "
                          f"n_steps x n_envs ({n_steps} x {n_envs_})")
     minibatches = n_envs_ * n_steps // batch
-    if recurrent and n_envs_ % minibatches:
-        raise ValueError(f"the jax backend's recurrent PPO takes whole envs' sequences as "
-                         f"minibatches: n_envs ({n_envs_}) must be divisible by the number of "
-                         f"minibatches (n_steps x n_envs / batch_size = {minibatches})")
+    if recurrent and batch % n_steps:
+        raise ValueError(f"the jax backend's recurrent PPO needs batch_size ({batch}) to be a "
+                         f"multiple of n_steps ({n_steps}): its minibatches are rows of whole "
+                         f"envs' sequences, masked to sb3-contrib's slices")
     norm = settings["normalize"]
     norm = None if norm is None else {**VECNORMALIZE_DEFAULTS, **norm}
     return Recipe(
@@ -430,8 +431,13 @@ class JaxTraining:
 
     def to_dict(self) -> dict[str, Any]:
         data = {k: v for k, v in asdict(self).items() if k not in ("train_state", "resumable")}
+        unmatched = list(UNMATCHED)
+        if self.kind == "recurrent":
+            from .recurrent_ppo import UNMATCHED as RECURRENT_UNMATCHED
+
+            unmatched += RECURRENT_UNMATCHED
         data.update(per_seed=self.per_seed, iqm=self.iqm, steps_trained=self.steps_trained,
-                    unmatched=list(UNMATCHED), backend="jax")
+                    unmatched=unmatched, backend="jax")
         return data
 
 

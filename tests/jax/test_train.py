@@ -201,7 +201,7 @@ def test_the_recurrent_recipe_is_ppo_lstm_yml_translated() -> None:
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"policy_kwargs": {"shared_lstm": True, "enable_critic_lstm": False}}, "shared_lstm=False"),
     ({"policy_kwargs": {"n_lstm_layers": 2}}, "n_lstm_layers=1"),
-    ({"batch_size": 384}, "whole envs' sequences"),       # 6 envs, 4 minibatches
+    ({"batch_size": 384}, "multiple of n_steps"),         # 6 envs of 256 steps, 4 minibatches
 ])
 def test_the_recurrent_recipe_refuses_another_lstm_arrangement(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):

@@ -18,19 +18,19 @@ for ``"ekf"`` also estimate / covariance, and the NIS as ``|Δ| / (1 + nis)``); 
 every transition agrees exactly:
 
 * ``paper`` (the printed reading, δ = 0.15 over 350..400, Q = 0.4; the EKF diverges in the
-  window and its watch flags it): 1.1e-12 / 1.1e-12 / 4.3e-13; 3.9e-13 / 2.5e-13; 2.4e-13;
+  window and its watch flags it): 1.1e-12 / 1.1e-12 / 4.3e-13; 6.6e-13 / 1.2e-12; 2.4e-13;
 * ``rate_random_start`` (the "rate" reading, a random start, process noise, two
-  overlapping δ windows): 4.5e-14 / 4.5e-14 / 3.3e-14; 2.7e-14 / 1.8e-12; 1.9e-15;
+  overlapping δ windows): 4.5e-14 / 4.5e-14 / 3.3e-14; 1.8e-14 / 1.8e-12; 2.0e-15;
 * ``mismatch`` (every nominal parameter wrong, truth's R and drive changed, no δ window):
-  5.7e-14 / 3.3e-14 / 8.8e-14; 3.3e-14 / 3.2e-12; 1.8e-15;
+  5.7e-14 / 3.3e-14 / 8.8e-14; 3.3e-14 / 3.4e-13; 1.8e-15;
 * ``blowup`` (δ = 0.15 over 100..300: the state leaves ``|x| <= 1e4`` on the 181st step,
-  which terminates with the terminal penalty): 9.0e-14 / 9.2e-14 / 4.9e-15; 1.2e-14 / 1.3e-12;
+  which terminates with the terminal penalty): 9.0e-14 / 9.2e-14 / 4.9e-15; 1.8e-14 / 2.3e-12;
   1.7e-13;
 * a simulation failure (δ = 100 from k = 10, ``state_bound`` 1e300: ``state_overflow`` on
-  the 85th step): 7.8e-16 / 7.8e-16 / 1.3e-16; the EKF until its watch flags it 2.3e-15 /
-  2.9e-15;
+  the 85th step): 7.8e-16 / 7.8e-16 / 1.3e-16; the EKF until its watch flags it 1.3e-15 /
+  1.6e-15;
 * the dict observations of the ``"ekf"`` kind (the "rate" reading, a random start):
-  ``estimate+covariance`` 8.2e-13, ``estimate+measurement`` 9.2e-14.
+  ``estimate+covariance`` 2.7e-13, ``estimate+measurement`` 8.5e-14.
 
 The plant is not bit for bit the numpy one: XLA's CPU backend contracts ``a * b + c`` into
 fused multiply-adds (numpy rounds the product first), so the JAX states differ from the
