@@ -121,8 +121,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, seeds: int | None = N
 def row_cost(task: tuple[str, dict[str, Any], Path]) -> float:
     """A row's expected cost, to hand the costliest rows out first: its env-steps times
     the seeds, five times for ``recurrent`` (RecurrentPPO's two LSTMs: Orbit-v0's
-    benchmark rows trained in 65 s against about 12 s for each PPO row, docs/jax.md), a
-    token for the LQG row (nothing trained)."""
+    benchmark rows in one process trained in 78 s against 11–16 s for each PPO row,
+    docs/jax.md), a token for the LQG row (nothing trained). Only the order matters."""
     what, job, _ = task
     if what == "lqg":
         return 1.0
