@@ -75,14 +75,22 @@ def step(cell: LSTMCell, params: Any, carry: Carry, x: Any, start: Any) -> Carry
     return cell.apply(params, (carry[0] * keep, carry[1] * keep), x)
 
 
-def unroll(cell: LSTMCell, params: Any, carry: Carry, xs: Any, starts: Any) -> tuple[Carry, Any]:
+def unroll(cell: LSTMCell, params: Any, carry: Carry, xs: Any, starts: Any,
+           restarts: tuple[Carry, Any] | None = None) -> tuple[Carry, Any]:
     """A sequence: ``xs (T, batch, n)``, ``starts (T, batch)``. Returns ``(final carry,
-    outputs (T, batch, H))``."""
-    def one(carry: Carry, inputs: tuple[Any, Any]) -> tuple[Carry, Any]:
-        carry = step(cell, params, carry, *inputs)
+    outputs (T, batch, H))``. ``restarts = (stored, begins)``: before each step where
+    ``begins (T, batch)`` is set the carry is replaced by ``stored``'s carry of that step
+    (``(h, c)``, each ``(T, batch, H)``) — see :func:`replay`."""
+    def one(carry: Carry, inputs: tuple[Any, ...]) -> tuple[Carry, Any]:
+        x, start, *restart = inputs
+        if restart:
+            (h, c), begin = restart[0]
+            carry = (jnp.where(begin[:, None], h, carry[0]),
+                     jnp.where(begin[:, None], c, carry[1]))
+        carry = step(cell, params, carry, x, start)
         return carry, carry[0]
 
-    return jax.lax.scan(one, carry, (xs, starts))
+    return jax.lax.scan(one, carry, (xs, starts, *([restarts] if restarts else [])))
 
 
 def replay(cell: LSTMCell, params: Any, stored: Carry, xs: Any, starts: Any, begins: Any
@@ -95,13 +103,5 @@ def replay(cell: LSTMCell, params: Any, stored: Carry, xs: Any, starts: Any, beg
     ``begins (T, batch)``. A row begins from its first stored carry; where an episode starts
     the carry is cleared after the replacement, as ``_process_sequence`` multiplies the
     stored state by ``1 − episode_start``. Returns the outputs ``(T, batch, H)``."""
-    def one(carry: Carry, inputs: tuple[Any, Any, Any, Any]) -> tuple[Carry, Any]:
-        stored_now, x, start, begin = inputs
-        carry = (jnp.where(begin[:, None], stored_now[0], carry[0]),
-                 jnp.where(begin[:, None], stored_now[1], carry[1]))
-        carry = step(cell, params, carry, x, start)
-        return carry, carry[0]
-
     first = (stored[0][0], stored[1][0])
-    _, outputs = jax.lax.scan(one, first, (stored, xs, starts, begins))
-    return outputs
+    return unroll(cell, params, first, xs, starts, (stored, begins))[1]
