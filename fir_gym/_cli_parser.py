@@ -232,8 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_runner_options(p, "(kind, seed) jobs")
 
     p = command("benchmark-controllers",
-                "controllers on estimates: the five plants x eight kinds x 5 seeds (about "
-                "2.5 h on 2 cores)")
+                "controllers on estimates: the five plants x their eight or nine kinds x 5 "
+                "seeds (about 2.5 h on 2 cores)")
     p.add_argument("--quick", action="store_true",
                    help="2 seeds and tiny budgets: checks the pipeline in under 3 minutes")
     p.add_argument("--out", default="benchmark", help="output folder")
@@ -247,8 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "file of its tables, e.g. README.md), whose rows stand beside the JAX "
                         "rows (default: none)")
     p.add_argument("--kinds", default=None,
-                   help="with --backend jax: comma-separated subset of the rows' kinds, e.g. "
-                        "recurrent,lqg (default: every kind)")
+                   help="comma-separated subset of the rows' kinds, e.g. recurrent,lqg "
+                        "(default: every kind of each plant)")
     _add_runner_options(p, "(plant, kind, seed) jobs",
                         jax="; jax: every learned kind (RecurrentPPO for recurrent) and the "
                             "LQG row, all seeds of a plant and kind in one compiled program "

@@ -379,15 +379,12 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     if args.compare_with:
         raise ValueError("--compare-with puts an SB3 benchmark beside the jax backend's: give "
                          "it with --backend jax")
-    if args.kinds:
-        raise ValueError("--kinds selects rows of the jax backend's benchmark (--backend jax); "
-                         "the SB3 benchmark runs every kind (compare-controllers --observations "
-                         "trains a subset)")
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()] if args.kinds else None
     from .training.benchmark import print_report, run_benchmark
 
     with _runner(args) as runner:
         report = run_benchmark(args.out, quick=args.quick, runner=runner,
-                               seeds=args.seeds, plants=plants)
+                               seeds=args.seeds, plants=plants, kinds=kinds)
     print_report(report)
     print(f"\nwrote {Path(args.out, 'BENCHMARK.md')}")
     return 0

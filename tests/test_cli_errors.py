@@ -225,6 +225,12 @@ def test_json_of_speed_is_untouched_by_the_cli_parser(tmp_path, monkeypatch):
 def test_benchmark_options_of_the_other_backend_are_refused_in_one_line(capsys, tmp_path):
     one_line(capsys, ["benchmark-controllers", "--compare-with", str(tmp_path), "--out",
                       str(tmp_path / "b")], "--compare-with", "--backend jax")
-    one_line(capsys, ["benchmark-controllers", "--kinds", "recurrent", "--out",
-                      str(tmp_path / "b")], "--kinds", "--backend jax")
+    assert not (tmp_path / "b").exists()
+
+
+def test_benchmark_kinds_are_checked_before_any_work(capsys, tmp_path):
+    one_line(capsys, ["benchmark-controllers", "--kinds", "recurent", "--out",
+                      str(tmp_path / "b")], "kinds must be among", "recurent")
+    one_line(capsys, ["benchmark-controllers", "--kinds", "kf", "--plants",
+                      "fir_gym/Orbit-v0", "--out", str(tmp_path / "b")], "kf", "no row")
     assert not (tmp_path / "b").exists()

@@ -4,9 +4,9 @@ that the JAX backend has, every seed of a (plant, kind) in one compiled program.
 The plan is the SB3 benchmark's (:data:`fir_gym.training.benchmark.PLANTS`: the plants'
 episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` seeds,
 :data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes, the kinds' options such as
-the windowed filters' horizon), its kinds per plant those of the robustness benchmark's
-learned grid on the nominal plant (:data:`fir_gym.robustness.plan.PLAIN_KINDS` and the
-plant's ``learned_estimators``: the rows of README.md's benchmark table) that the JAX
+the windowed filters' horizon), its kinds per plant the SB3 benchmark's
+(:func:`fir_gym.training.benchmark.plant_kinds`: those of the robustness benchmark's
+learned grid on the nominal plant, the rows of README.md's benchmark table) that the JAX
 backend trains on the plant (:data:`fir_gym.jax.train.SUPPORTED`) — all of them; PPO with the
 shipped recipe (:func:`fir_gym.jax.train.train`; RecurrentPPO's for ``recurrent``,
 :mod:`fir_gym.jax.recurrent_ppo`). Each row reports the IQM of the seeds'
@@ -31,10 +31,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from fir_gym.robustness.plan import EVAL_SEED, PLAIN_KINDS
-from fir_gym.robustness.plan import PLANTS as ROBUSTNESS_PLANTS
+from fir_gym.robustness.plan import EVAL_SEED
 from fir_gym.tables import format_table
-from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS
+from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS, plant_kinds
 from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
 
 from .registry import PLANTS as JAX_PLANTS
@@ -72,8 +71,7 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     jobs = []
     for env_id in chosen:
         spec = PLANTS[env_id]
-        planned = (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators)
-        have = [k for k in planned if k in SUPPORTED[env_id]]
+        have = [k for k in plant_kinds(env_id) if k in SUPPORTED[env_id]]
         for kind in have if kinds is None else [k for k in kinds if k in have]:
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],

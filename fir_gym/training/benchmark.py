@@ -5,12 +5,14 @@ UncertainOscillator-v0 (a damped oscillator regulated to a setpoint, its damping
 CarrierMotion-v0 (deck-motion compensation: predict the deck one interval ahead),
 VanDerPol-v0 (an unstable focus under heavy process and measurement noise) and
 PendulumSlider-v0 (MuJoCo, every state measured with noise), with the episode settings of
-the robustness benchmark's plan — and eight kinds on each: PPO on the
+the robustness benchmark's plan — and on each the kinds of :func:`plant_kinds`: PPO on the
 ``true`` state, the raw ``measurement``, a ``measurement-stack`` (the last K
 measurements and actions), a ``recurrent`` policy (RecurrentPPO on the measurements),
-the ``ekf``, ``ukf`` and ``efir`` estimates, and the classical ``lqg`` (the LQR of the
-nominal model on the EKF's estimate; nothing trained). :data:`SEEDS` seeds per
-learned kind, every run evaluated on the same :data:`EPISODES` episodes.
+PPO on the estimate of each of the plant's learned estimators in the robustness plan
+(``ekf``, ``ukf`` and ``efir``; on the linear CarrierMotion-v0 ``kf``, ``ukf``, ``fir`` and
+``ufir``) — the rows of README.md's table, and the JAX backend's plan — and the classical
+``lqg`` (the LQR of the nominal model on the EKF's estimate; nothing trained). :data:`SEEDS`
+seeds per learned kind, every run evaluated on the same :data:`EPISODES` episodes.
 
 The table gives, per plant and kind, the interquartile mean (IQM) of the per-seed
 mean returns with a 95 % bootstrap interval over the seeds and the shared evaluation
@@ -26,7 +28,7 @@ memory and whether LQG beats the learned controllers. Learning curves per plant 
 
 Budget: the steps per plant (:data:`PLANTS`) were chosen so that three plants' run, 108
 jobs (3 plants × (7 learned kinds × 5 seeds + the LQG)), took about 90 minutes on 2 cores
-(``--backend joblib``); all five plants' 180 jobs take about five thirds of that.
+(``--backend joblib``); all five plants' 185 jobs take about five thirds of that.
 ``--quick`` (2 seeds, a few
 thousand steps, 2 evaluation episodes) checks the whole pipeline in under 3 minutes
 and its numbers mean nothing.
@@ -40,6 +42,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fir_gym.robustness.plan import PLAIN_KINDS
 from fir_gym.robustness.plan import PLANTS as ROBUSTNESS_PLANTS
 from fir_gym.tables import format_table
 
@@ -59,19 +62,35 @@ PLANTS: dict[str, dict[str, Any]] = {
     env_id: {"env_kwargs": dict(plan.env_kwargs), "steps": plan.steps,
              "kind_kwargs": {k: dict(v) for k, v in plan.estimator_kwargs.items()}}
     for env_id, plan in ROBUSTNESS_PLANTS.items()}
-KINDS = ("true", "measurement", "measurement-stack", "recurrent", "ekf", "ukf", "efir", "lqg")
-FILTERS = ("ekf", "ukf", "efir")
 MEMORY = ("measurement-stack", "recurrent")
 SEEDS = 5
 EPISODES = 20
 QUICK = {"seeds": 2, "steps": 2048, "episodes": 2}
 
 
+def plant_kinds(env_id: str) -> tuple[str, ...]:
+    """The benchmark's kinds on a plant, in table order: :data:`~fir_gym.robustness.plan.
+    PLAIN_KINDS`, the plant's learned estimators in the robustness plan, and ``lqg``."""
+    return (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators, "lqg")
+
+
+#: every kind of some plant, in table order
+KINDS = tuple(dict.fromkeys(k for env_id in PLANTS for k in plant_kinds(env_id) if k != "lqg")
+              ) + ("lqg",)
+
+
 def benchmark_jobs(out: Path, *, quick: bool = False, seeds: int | None = None,
-                   plants: Sequence[str] | None = None) -> list[dict[str, Any]]:
-    """Every (plant, kind, seed) job, checked (the classical kinds run once: seed 0)."""
+                   plants: Sequence[str] | None = None, kinds: Sequence[str] | None = None
+                   ) -> list[dict[str, Any]]:
+    """Every (plant, kind, seed) job, checked (the classical kinds run once: seed 0).
+
+    ``kinds``: only these rows (each a kind of :data:`KINDS`; a plant without one of them,
+    such as ``ekf`` on CarrierMotion-v0, simply has no such row)."""
     n_seeds = seeds or (QUICK["seeds"] if quick else SEEDS)
     episodes = QUICK["episodes"] if quick else EPISODES
+    unknown = sorted(set(kinds or ()) - set(KINDS))
+    if unknown:
+        raise ValueError(f"kinds must be among {', '.join(KINDS)}; got {', '.join(unknown)}")
     jobs = []
     for env_id in plants or PLANTS:
         if env_id not in PLANTS:
@@ -79,28 +98,34 @@ def benchmark_jobs(out: Path, *, quick: bool = False, seeds: int | None = None,
                              f"{', '.join(PLANTS)}")
         spec = PLANTS[env_id]
         steps = QUICK["steps"] if quick else spec["steps"]
-        learned = [k for k in KINDS if k != "lqg"]
+        chosen = [k for k in plant_kinds(env_id) if kinds is None or k in kinds]
+        learned = [k for k in chosen if k != "lqg"]
         configs = make_configs(env_id, learned, range(n_seeds), steps=steps,
                                kind_kwargs={k: v for k, v in spec["kind_kwargs"].items()
                                             if k in learned},
-                               env_kwargs=spec["env_kwargs"])
-        configs += make_configs(env_id, ["lqg"], [0], env_kwargs=spec["env_kwargs"])
+                               env_kwargs=spec["env_kwargs"]) if learned else []
+        if "lqg" in chosen:
+            configs += make_configs(env_id, ["lqg"], [0], env_kwargs=spec["env_kwargs"])
         validate(configs)
         folder = out / env_id.split("/")[-1]
         jobs += [{"config": c, "run_dir": str(folder / f"{c.observation_kind}-seed{c.seed}"),
                   "episodes": episodes, "eval_seed": 10_000, "resume": True} for c in configs]
+    if not jobs:
+        raise ValueError(f"kinds {', '.join(kinds or ())}: no row on the plants chosen "
+                         f"({', '.join(plants or PLANTS)})")
     return jobs
 
 
 def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
-                  seeds: int | None = None, plants: Sequence[str] | None = None
-                  ) -> dict[str, Any]:
-    """Run every job, then write ``OUT/BENCHMARK.md``, ``OUT/results.json`` and figures."""
+                  seeds: int | None = None, plants: Sequence[str] | None = None,
+                  kinds: Sequence[str] | None = None) -> dict[str, Any]:
+    """Run every job (of ``kinds`` only, when given: :func:`benchmark_jobs`), then write
+    ``OUT/BENCHMARK.md``, ``OUT/results.json`` and figures."""
     from fir_gym.scenarios.runner import SERIAL
 
     out = Path(out)
     start = time.perf_counter()
-    jobs = benchmark_jobs(out, quick=quick, seeds=seeds, plants=plants)
+    jobs = benchmark_jobs(out, quick=quick, seeds=seeds, plants=plants, kinds=kinds)
     results = (runner or SERIAL).map(run_job, jobs, desc="benchmark-controllers")
     seconds = time.perf_counter() - start
     tables = summarise(results)
@@ -113,7 +138,8 @@ def run_benchmark(out: str | Path, *, quick: bool = False, runner: Any = None,
     curves: dict[str, bool] = {}
     for env_id in tables:
         folder = out / env_id.split("/")[-1]
-        runs = {k: sorted(folder.glob(f"{k}-seed*")) for k in KINDS if k != "lqg"}
+        runs = {k: sorted(folder.glob(f"{k}-seed*")) for k in plant_kinds(env_id)
+                if k != "lqg"}
         written = plot_learning_curves(
             runs, figures / f"{env_id.split('/')[-1]}_learning_curves.png", title=env_id)
         curves[env_id] = written is not None
@@ -135,7 +161,7 @@ def summarise(results: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
     tables: dict[str, list[dict[str, Any]]] = {}
     for env_id in dict.fromkeys(r["config"]["env_id"] for r in results):
         rows = [r for r in results if r["config"]["env_id"] == env_id]
-        per_kind = {k: [r for r in rows if r["kind"] == k] for k in KINDS}
+        per_kind = {k: [r for r in rows if r["kind"] == k] for k in plant_kinds(env_id)}
         per_kind = {k: runs for k, runs in per_kind.items() if runs}
         returns = {k: [list(map(float, r["returns"])) for r in runs]
                    for k, runs in per_kind.items()}
@@ -176,7 +202,7 @@ def answers(tables: dict[str, list[dict[str, Any]]]) -> list[str]:
         name = env_id.split("/")[-1]
         if "true" not in rows:
             continue
-        best_filter = _best(rows, FILTERS)
+        best_filter = _best(rows, [k for k in rows if k not in (*PLAIN_KINDS, "lqg")])
         best_memory = _best(rows, MEMORY)
         learned = [k for k in rows if k not in ("lqg",)]
         best_learned = _best(rows, [k for k in learned if k != "true"])

@@ -7,7 +7,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 from fir_gym.cli import main
-from fir_gym.training.benchmark import KINDS, PLANTS, answers
+from fir_gym.training.benchmark import KINDS, PLANTS, answers, benchmark_jobs, plant_kinds
 
 
 def _row(kind, iqm, low, high, norm=(1.0, 1.0, 1.0)):
@@ -40,10 +40,12 @@ def test_quick_benchmark_runs_every_plant_and_kind(tmp_path, capsys):
                  "--no-progress"]) == 0
     report = json.loads((tmp_path / "results.json").read_text())
     assert report["quick"] and set(report["tables"]) == set(PLANTS)
-    for table in report["tables"].values():
-        assert [r["kind"] for r in table] == list(KINDS)
+    for env_id, table in report["tables"].items():
+        assert [r["kind"] for r in table] == list(plant_kinds(env_id))
         estimated = {r["kind"]: r["rmse"] for r in table}
-        assert all(estimated[k] is not None for k in ("ekf", "ukf", "efir", "lqg"))
+        filters = [k for k in estimated if k not in ("true", "measurement",
+                                                     "measurement-stack", "recurrent")]
+        assert len(filters) >= 4 and all(estimated[k] is not None for k in filters)
         assert estimated["true"] is None
     assert len(report["answers"]) == len(PLANTS)
     text = (tmp_path / "BENCHMARK.md").read_text()
@@ -81,3 +83,24 @@ def test_answers_compare_paired_episodes_when_the_table_has_them():
     table[-1]["episode_returns"] = [e + noise]
     table[-1]["iqm"] = float(np.mean(e + noise))
     assert "contains 0) PPO on the true state" in answers({"fir_gym/Orbit-v0": table})[0]
+
+
+def test_the_kinds_per_plant_are_the_jax_backends_and_readmes():
+    """Both backends train the same rows: the robustness plan's learned estimators per plant
+    (CarrierMotion-v0, a linear plant: kf, ukf, fir, ufir), the plain kinds and the LQG."""
+    assert plant_kinds("fir_gym/CarrierMotion-v0") == (
+        "true", "measurement", "measurement-stack", "recurrent", "kf", "ukf", "fir", "ufir",
+        "lqg")
+    assert plant_kinds("fir_gym/Orbit-v0")[4:] == ("ekf", "ukf", "efir", "lqg")
+    assert set(KINDS) == {k for env_id in PLANTS for k in plant_kinds(env_id)}
+
+
+def test_kinds_choose_rows_and_a_plant_without_one_has_no_such_row(tmp_path):
+    jobs = benchmark_jobs(tmp_path, seeds=2, kinds=["ekf", "lqg"],
+                          plants=["fir_gym/Orbit-v0", "fir_gym/CarrierMotion-v0"])
+    got = [(j["config"].env_id.split("/")[-1], j["config"].observation_kind, j["config"].seed)
+           for j in jobs]
+    assert got == [("Orbit-v0", "ekf", 0), ("Orbit-v0", "ekf", 1), ("Orbit-v0", "lqg", 0),
+                   ("CarrierMotion-v0", "lqg", 0)]
+    with pytest.raises(ValueError, match="kinds must be among"):
+        benchmark_jobs(tmp_path, kinds=["ekf", "bogus"])
