@@ -77,13 +77,14 @@ def main() -> None:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
     print(f"load average at the start: {os.getloadavg()}")
     start = time.perf_counter()
-    jobs = benchmark_jobs(out / "sb3", quick=args.quick, seeds=args.seeds, plants=plants, kinds=kinds)
+    jobs = benchmark_jobs(out / "sb3", quick=args.quick, seeds=args.seeds, plants=plants,
+                          kinds=kinds)
     runner = Runner("joblib", jobs=args.jobs) if args.jobs > 1 else SERIAL
     sb3 = runner.map(run_job, jobs, desc="sb3")
     sb3_seconds = time.perf_counter() - start
     start = time.perf_counter()
-    report = run_benchmark(out / "jax", quick=args.quick, seeds=args.seeds, plants=plants, kinds=kinds,
-                           progress=False, jobs=args.jobs if args.jobs > 1 else None)
+    report = run_benchmark(out / "jax", quick=args.quick, seeds=args.seeds, plants=plants,
+                           kinds=kinds, progress=False, jobs=args.jobs if args.jobs > 1 else None)
     jax_seconds = time.perf_counter() - start
 
     rows, lines = [], []
