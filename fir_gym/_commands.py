@@ -372,14 +372,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _listed(text: str | None) -> list[str] | None:
+    """A comma-separated option as its non-empty items (``None`` when not given)."""
+    return [item.strip() for item in text.split(",") if item.strip()] if text else None
+
+
 def cmd_benchmark(args: argparse.Namespace) -> int:
-    plants = [p.strip() for p in args.plants.split(",")] if args.plants else None
+    plants, kinds = _listed(args.plants), _listed(args.kinds)
     if args.backend == "jax":
-        return benchmark_jax(args, plants)
+        return benchmark_jax(args, plants, kinds)
     if args.compare_with:
         raise ValueError("--compare-with puts an SB3 benchmark beside the jax backend's: give "
                          "it with --backend jax")
-    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()] if args.kinds else None
     from .training.benchmark import print_report, run_benchmark
 
     with _runner(args) as runner:
@@ -390,7 +394,8 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
-def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
+def benchmark_jax(args: argparse.Namespace, plants: list[str] | None,
+                  kinds: list[str] | None) -> int:
     """``fir-gym benchmark-controllers --backend jax``: :func:`fir_gym.jax.benchmark.
     run_benchmark` (every learned kind and the LQG row, or ``--kinds``), its tables printed."""
     from ._extras import require
@@ -401,7 +406,6 @@ def benchmark_jax(args: argparse.Namespace, plants: list[str] | None) -> int:
                          "local worker processes: it takes no --scheduler")
     from .jax.benchmark import markdown, run_benchmark
 
-    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()] if args.kinds else None
     report = run_benchmark(args.out, quick=args.quick, seeds=args.seeds, plants=plants,
                            kinds=kinds, compare_with=args.compare_with,
                            progress=not args.no_progress, jobs=args.jobs)
@@ -421,9 +425,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
         print(f"rebuilt {out / 'REPORT.md'} from {out / 'results.json'} "
               f"({len(report['tables'])} cells)")
         return 0
-    plants = [p.strip() for p in args.plants.split(",") if p.strip()] if args.plants else None
-    conditions = ([c.strip() for c in args.conditions.split(",") if c.strip()]
-                  if args.conditions else None)
+    plants, conditions = _listed(args.plants), _listed(args.conditions)
     check_selection(plants, conditions)              # a bad name fails before any work
     jax = args.backend == "jax"
     if jax and args.scheduler:

@@ -5,7 +5,7 @@ The plan is the SB3 benchmark's (:data:`fir_gym.training.benchmark.PLANTS`: the 
 episode settings and training steps, :data:`~fir_gym.training.benchmark.SEEDS` seeds,
 :data:`~fir_gym.training.benchmark.EPISODES` evaluation episodes, the kinds' options such as
 the windowed filters' horizon), its kinds per plant the SB3 benchmark's
-(:func:`fir_gym.training.benchmark.plant_kinds`: those of the robustness benchmark's
+(:func:`fir_gym.training.benchmark.chosen_kinds`: those of the robustness benchmark's
 learned grid on the nominal plant, the rows of README.md's benchmark table) that the JAX
 backend trains on the plant (:data:`fir_gym.jax.train.SUPPORTED`) — all of them; PPO with the
 shipped recipe (:func:`fir_gym.jax.train.train`; RecurrentPPO's for ``recurrent``,
@@ -33,7 +33,7 @@ from typing import Any
 
 from fir_gym.robustness.plan import EVAL_SEED
 from fir_gym.tables import format_table
-from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS, plant_kinds
+from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS, chosen_kinds
 from fir_gym.training.stats import episode_bootstrap, iqm, percentile_interval
 
 from .registry import PLANTS as JAX_PLANTS
@@ -71,8 +71,7 @@ def benchmark_plan(*, quick: bool = False, seeds: int | None = None,
     jobs = []
     for env_id in chosen:
         spec = PLANTS[env_id]
-        have = [k for k in plant_kinds(env_id) if k in SUPPORTED[env_id]]
-        for kind in have if kinds is None else [k for k in kinds if k in have]:
+        for kind in [k for k in chosen_kinds(env_id, kinds) if k in SUPPORTED[env_id]]:
             jobs.append({"env_id": env_id, "kind": kind, "seeds": n_seeds,
                          "steps": QUICK["steps"] if quick else spec["steps"],
                          "env_kwargs": dict(spec["env_kwargs"]),

@@ -74,6 +74,12 @@ def plant_kinds(env_id: str) -> tuple[str, ...]:
     return (*PLAIN_KINDS, *ROBUSTNESS_PLANTS[env_id].learned_estimators, "lqg")
 
 
+def chosen_kinds(env_id: str, kinds: Sequence[str] | None = None) -> list[str]:
+    """The rows of a plant: :func:`plant_kinds`, only those in ``kinds`` when given, in table
+    order (both backends' plans choose their rows by it)."""
+    return [k for k in plant_kinds(env_id) if kinds is None or k in kinds]
+
+
 #: every kind of some plant, in table order
 KINDS = tuple(dict.fromkeys(k for env_id in PLANTS for k in plant_kinds(env_id) if k != "lqg")
               ) + ("lqg",)
@@ -98,7 +104,7 @@ def benchmark_jobs(out: Path, *, quick: bool = False, seeds: int | None = None,
                              f"{', '.join(PLANTS)}")
         spec = PLANTS[env_id]
         steps = QUICK["steps"] if quick else spec["steps"]
-        chosen = [k for k in plant_kinds(env_id) if kinds is None or k in kinds]
+        chosen = chosen_kinds(env_id, kinds)
         learned = [k for k in chosen if k != "lqg"]
         configs = make_configs(env_id, learned, range(n_seeds), steps=steps,
                                kind_kwargs={k: v for k, v in spec["kind_kwargs"].items()
