@@ -14,6 +14,7 @@ Needs the ``jax`` extra::
 
     python scripts/jax_stepping_speed.py                 # 2048 envs x 200 steps
     python scripts/jax_stepping_speed.py --quick
+    python scripts/jax_stepping_speed.py --devices 1 2     # one core, then both
     python scripts/jax_stepping_speed.py --modes step step_env step_with_noise \
         --prng threefry2x32 rbg
 """
@@ -23,7 +24,7 @@ from __future__ import annotations
 import argparse
 
 import fir_gym  # noqa: F401  (registers the ids)
-from fir_gym.benchmarks.jax_training import MODES
+from fir_gym.benchmarks.jax_training import MODES, request_cpu_devices
 from fir_gym.benchmarks.jax_training import jax_stepping_rate as jax_rate
 from fir_gym.benchmarks.jax_training import numpy_stepping_rate as numpy_rate
 from fir_gym.machine import cores, cpu_model, load_average
@@ -43,8 +44,14 @@ def main(argv: list[str] | None = None) -> None:
                         help="JAX key implementation(s) to time (default threefry2x32)")
     parser.add_argument("--modes", nargs="+", default=["step"], choices=MODES,
                         help="JAX step(s) to time (default: gymnax's step, with auto-reset)")
+    parser.add_argument("--devices", type=int, nargs="+", default=[1],
+                        help="CPU devices the JAX envs are sharded across, one figure each "
+                             "(default 1; JAX is given the largest number before it starts)")
     parser.add_argument("--quick", action="store_true", help="256 envs, 50 steps, 2 reps")
     args = parser.parse_args(argv)
+    have = request_cpu_devices(max(args.devices))
+    if max(args.devices) > have:
+        parser.error(f"--devices: JAX has {have} CPU device(s); got {max(args.devices)}")
     if args.quick:
         args.envs, args.steps, args.reps, args.numpy_steps = 256, 50, 2, 10
         args.numpy_batches = [64, 256]
@@ -58,12 +65,15 @@ def main(argv: list[str] | None = None) -> None:
     best_batch = max(rates, key=lambda b: rates[b])
     print(f"JAX Orbit(ekf), jit(vmap) over {args.envs} envs, lax.scan of {args.steps} steps; "
           f"best numpy: {best_batch} envs, {rates[best_batch]:,.0f} env-steps/s")
-    for mode in args.modes:
-        for prng in args.prng if mode != "step_with_noise" else args.prng[:1]:
-            jax_steps, compile_s = jax_rate(args.envs, args.steps, args.reps, prng, mode)
-            keys = f", {prng} keys" if mode != "step_with_noise" else ""
-            print(f"  {mode}{keys}: {jax_steps:12,.0f} env-steps/s, ratio JAX / best numpy "
-                  f"{jax_steps / rates[best_batch]:.2f} (compile {compile_s:.1f} s)")
+    for devices in args.devices:
+        for mode in args.modes:
+            for prng in args.prng if mode != "step_with_noise" else args.prng[:1]:
+                jax_steps, compile_s = jax_rate(args.envs, args.steps, args.reps, prng, mode,
+                                                devices=devices)
+                keys = f", {prng} keys" if mode != "step_with_noise" else ""
+                print(f"  {mode}{keys}, {devices} device(s): {jax_steps:12,.0f} env-steps/s, "
+                      f"ratio JAX / best numpy {jax_steps / rates[best_batch]:.2f} (compile "
+                      f"{compile_s:.1f} s)")
     print(f"load average after {load_average()}")
 
 

@@ -15,8 +15,13 @@ Three ratios, each of env-steps per second measured in the same run as its refer
   envs and scanned over the steps (a proportional policy on the estimate), against the
   native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
   (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 —
-  target ≥ 2. The same JAX env stepped with the noise given (``step_with_noise``, no key
-  draws, no auto-reset) is the floor: the plant and the filter alone. The same ratio is
+  target ≥ 2. The JAX envs are sharded across one CPU device per core
+  (:func:`request_cpu_devices`: XLA runs each device's part on its own thread, where one
+  device steps the whole batch on one core), as JAX would spread them over a GPU's cores;
+  the numpy vector env is one process (numpy's array operations run on one core). The
+  one-device figure is reported beside it: the ratio per core. The same JAX env stepped
+  with the noise given (``step_with_noise``, no key draws, no auto-reset; on the same
+  devices) is the floor: the plant and the filter alone. The same ratio is
   measured again **under the conditions** the learned benchmarks train in (:data:`CONDITIONS`:
   every randomizable parameter drawn at each reset with spread 0.1, and the sensor losing 30 %
   of the readings — the EKF predicting through them): on both sides the draws, the held
@@ -57,20 +62,45 @@ def policy(obs: np.ndarray) -> np.ndarray:
     return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
 
 
-def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
-                      mode: str = "step", conditions: bool = False) -> tuple[float, float]:
-    """(env-steps/s of the jitted, vmapped Orbit+EKF env — best of ``reps`` —, compile
-    seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`,
-    ``conditions`` the env under :data:`CONDITIONS` (mode ``"step"`` only)."""
+def request_cpu_devices(count: int) -> int:
+    """Ask JAX for ``count`` CPU devices — one per core, so that a batch sharded across them
+    (:func:`jax_stepping_rate`'s ``devices``) steps on every core: XLA runs one device's
+    program on one thread. JAX takes the count only before its backends start (before the
+    first JAX operation, and before ``import gymnax`` or :mod:`fir_gym.jax`, whose imports
+    start them); afterwards the count stays. Returns the number of CPU devices JAX has."""
+    import jax
+
+    try:
+        jax.config.update("jax_num_cpu_devices", int(count))
+    except RuntimeError:                  # the backends have started: keep what they have
+        pass
+    return len(jax.devices("cpu"))
+
+
+def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: str = "step",
+                     conditions: bool = False, devices: int = 1
+                     ) -> tuple[Any, Any]:
+    """``(run, keys)``: the jitted closed loop of :func:`jax_stepping_rate` — ``run(keys(i))``
+    steps ``n_envs`` Orbit-v0 + EKF envs ``steps`` times from the keys of seed ``i`` and
+    returns each env's last estimate and summed reward. ``devices > 1`` shards the envs
+    evenly across the first ``devices`` CPU devices (:func:`request_cpu_devices`); each env's
+    numbers do not depend on it (one env's keys and arithmetic are the same on any device)."""
     import jax
     import jax.numpy as jnp
 
     from fir_gym.jax import make
     from fir_gym.jax.orbit import OrbitNoise
 
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
     if conditions and mode != "step":
         raise ValueError(f"conditions are drawn by the env's step: mode must be 'step'; got "
                          f"{mode!r}")
+    available = jax.devices("cpu")
+    if not 1 <= devices <= len(available) or n_envs % devices:
+        raise ValueError(f"devices must be between 1 and the {len(available)} CPU device(s) "
+                         f"JAX has (request_cpu_devices) and divide n_envs = {n_envs}; got "
+                         f"{devices!r}")
     env, params = make(ENV_ID, "ekf", **(CONDITIONS if conditions else {}))
     zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
 
@@ -92,16 +122,43 @@ def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2
         (obs, _), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
         return obs, rewards.sum()                  # the estimate (the kind's observation)
 
-    run = jax.jit(jax.vmap(one))
-    keys = jax.random.split(jax.random.key(0, impl=prng), n_envs)
+    if devices == 1:
+        run = jax.jit(jax.vmap(one))
+
+        def keys(seed: int) -> Any:
+            return jax.random.split(jax.random.key(seed, impl=prng), n_envs)
+    else:
+        from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+        envs = NamedSharding(Mesh(np.array(available[:devices]), ("envs",)),
+                             PartitionSpec("envs"))
+        run = jax.jit(jax.vmap(one), in_shardings=envs, out_shardings=envs)
+
+        def keys(seed: int) -> Any:
+            return jax.device_put(jax.random.split(jax.random.key(seed, impl=prng), n_envs),
+                                  envs)
+    return run, keys
+
+
+def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
+                      mode: str = "step", conditions: bool = False, devices: int = 1
+                      ) -> tuple[float, float]:
+    """(env-steps/s of the jitted, vmapped Orbit+EKF env — best of ``reps`` —, compile
+    seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`,
+    ``conditions`` the env under :data:`CONDITIONS` (mode ``"step"`` only), ``devices`` the
+    CPU devices the envs are sharded across (:func:`stepping_program`)."""
+    import jax
+
+    run, keys = stepping_program(n_envs, steps, prng, mode, conditions, devices)
+    first = keys(0)
     start = time.perf_counter()
-    jax.block_until_ready(run(keys))
+    jax.block_until_ready(run(first))
     compile_s = time.perf_counter() - start
     best = np.inf
     for rep in range(reps):
-        keys = jax.random.split(jax.random.key(rep + 1, impl=prng), n_envs)
+        given = keys(rep + 1)
         start = time.perf_counter()
-        jax.block_until_ready(run(keys))
+        jax.block_until_ready(run(given))
         best = min(best, time.perf_counter() - start)
     return n_envs * steps / best, compile_s
 
@@ -255,9 +312,17 @@ def sb3_ppo_rate(steps: int, kind: str = KIND) -> dict[str, Any]:
 def run(quick: bool = False) -> dict[str, Any]:
     """Both ratios and the floor (needs the ``jax`` and ``rl`` extras); ``{"skipped":
     reason}`` without them."""
+    from fir_gym.machine import cores
+
+    try:
+        import jax  # noqa: F401
+    except ImportError as err:
+        return {"skipped": f"needs the jax and rl extras ({err.name} is missing)"}
+    # one CPU device per core, asked for before gymnax's import starts JAX's backends (in a
+    # process where they have started, what they have: then the stepping uses one device)
+    devices = request_cpu_devices(cores())
     try:
         import gymnax  # noqa: F401
-        import jax  # noqa: F401
         import rejax  # noqa: F401
         import stable_baselines3  # noqa: F401
     except ImportError as err:
@@ -273,11 +338,15 @@ def run(quick: bool = False) -> dict[str, Any]:
     numpy_rates = {b: numpy_stepping_rate(b, max(5, steps * 256 // b), reps) for b in batches}
     best_batch = max(numpy_rates, key=lambda b: numpy_rates[b])
     n_envs = 256 if quick else JAX_ENVS
-    stepping, compile_s = jax_stepping_rate(n_envs, steps, reps)
-    floor, _ = jax_stepping_rate(n_envs, steps, reps, mode="step_with_noise")
+    while n_envs % devices:                        # the envs split evenly across devices
+        devices -= 1
+    one_device, compile_s = jax_stepping_rate(n_envs, steps, reps)
+    stepping = (jax_stepping_rate(n_envs, steps, reps, devices=devices)[0] if devices > 1
+                else one_device)
+    floor, _ = jax_stepping_rate(n_envs, steps, reps, mode="step_with_noise", devices=devices)
     numpy_faulty = numpy_stepping_rate(best_batch, max(5, steps * 256 // best_batch), reps,
                                        conditions=True)
-    faulty, _ = jax_stepping_rate(n_envs, steps, reps, conditions=True)
+    faulty, _ = jax_stepping_rate(n_envs, steps, reps, conditions=True, devices=devices)
     lstm_steps = 8192 if quick else 32_768
     sb3_lstm = sb3_ppo_rate(lstm_steps, kind="recurrent")
     jax_lstm = jax_ppo_rate(lstm_steps, kind="recurrent")
@@ -292,13 +361,15 @@ def run(quick: bool = False) -> dict[str, Any]:
                     "ratio": jax_ppo["rate"] / sb3["rate"],
                     "ceiling": jax_free["rate"] / sb3["rate"], "steps": ppo_steps},
             "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
-                         "jax_envs": n_envs, "jax_steps_per_s": stepping,
+                         "jax_envs": n_envs, "jax_devices": devices,
+                         "jax_steps_per_s": stepping, "jax_one_device_steps_per_s": one_device,
                          "jax_compile_seconds": compile_s, "jax_given_noise_steps_per_s": floor,
                          "ratio": stepping / numpy_rates[best_batch],
+                         "ratio_one_device": one_device / numpy_rates[best_batch],
                          "ceiling": floor / numpy_rates[best_batch]},
             "stepping_conditions": {"numpy_steps_per_s": numpy_faulty,
                                     "numpy_batch": best_batch, "jax_envs": n_envs,
-                                    "jax_steps_per_s": faulty,
+                                    "jax_devices": devices, "jax_steps_per_s": faulty,
                                     "ratio": faulty / numpy_faulty}}
 
 
@@ -317,18 +388,30 @@ def print_results(res: dict[str, Any]) -> None:
           f"steps/s (ceiling {p['ceiling']:.3g}); compile {p['jax_compile_seconds']:.1f} s, "
           "not counted" + (f"; networks in float64: {f64:.4g} steps/s"
                            if (f64 := p.get("jax_float64_steps_per_s")) else "")],
-         [f"stepping, JAX {s['jax_envs']} envs / numpy best ({s['numpy_best_batch']} envs)",
+         [f"stepping, JAX {s['jax_envs']} envs on {cpus(s)} / numpy best "
+          f"({s['numpy_best_batch']} envs, one process)",
           s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_steps_per_s"], s["ratio"],
           "≥ 2", f"noise given, no auto-reset: {s['jax_given_noise_steps_per_s']:.4g} "
           f"steps/s (ceiling {s['ceiling']:.3g})"]]
-        + ([[f"stepping under mismatch 0.1 + dropout 0.3, JAX {c['jax_envs']} envs / numpy "
-             f"{c['numpy_batch']} envs", c["numpy_steps_per_s"], c["jax_steps_per_s"],
-             c["ratio"], "—", "the EKF predicting through the lost readings"]]
+        + ([["  the same, JAX on one CPU device (one core)",
+             s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_one_device_steps_per_s"],
+             s["ratio_one_device"], "—", "per core"]]
+           if s.get("jax_devices", 1) > 1 else [])
+        + ([[f"stepping under mismatch 0.1 + dropout 0.3, JAX {c['jax_envs']} envs on "
+             f"{cpus(c)} / numpy {c['numpy_batch']} envs", c["numpy_steps_per_s"],
+             c["jax_steps_per_s"], c["ratio"], "—",
+             "the EKF predicting through the lost readings"]]
            if (c := res.get("stepping_conditions")) else [])
         + ([["RecurrentPPO, ppo_lstm.yml, 16 envs (the recurrent kind, on the measurement)",
              r["sb3_steps_per_s"], r["jax_steps_per_s"], r["ratio"], "—",
              f"compile {r['jax_compile_seconds']:.1f} s, not counted"]]
            if (r := res.get("recurrent")) else []), floatfmt=".4g"))
+
+
+def cpus(stepping: dict[str, Any]) -> str:
+    """How many CPU devices a stepping figure used, in words."""
+    n = stepping.get("jax_devices", 1)
+    return "one CPU device" if n == 1 else f"{n} CPU devices (one per core)"
 
 
 def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:
@@ -338,5 +421,6 @@ def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float |
     p, s = res["ppo"], res["stepping"]
     return [("JAX PPO / SB3 PPO env-steps per second (Orbit-v0 + EKF, 16 envs)",
              p["ratio"], 6.0, p["ceiling"]),
-            (f"JAX Orbit-v0 + EKF step at {s['jax_envs']} envs / best numpy vector env",
+            (f"JAX Orbit-v0 + EKF step at {s['jax_envs']} envs on {cpus(s)} / best numpy "
+             "vector env",
              s["ratio"], 2.0, s["ceiling"])]

@@ -42,3 +42,56 @@ def test_the_stepping_rates_under_the_conditions_run() -> None:
     assert math.isfinite(rate) and rate > 0 and math.isfinite(numpy_rate) and numpy_rate > 0
     with pytest.raises(ValueError, match="mode must be 'step'"):
         jax_training.jax_stepping_rate(8, 4, 1, mode="step_env", conditions=True)
+
+
+SHARDED = """
+import sys
+import numpy as np
+from fir_gym.benchmarks.jax_training import request_cpu_devices, stepping_program
+devices = request_cpu_devices(2)
+out = {"devices": np.asarray(devices)}
+for n in (1, 2):
+    run, keys = stepping_program(8, 12, devices=n)
+    estimate, rewards = run(keys(3))
+    out[f"estimate{n}"], out[f"rewards{n}"] = np.asarray(estimate), np.asarray(rewards)
+    out[f"shards{n}"] = np.asarray(len(rewards.sharding.device_set))
+np.savez(sys.argv[1], **out)
+"""
+
+
+def test_sharding_the_envs_across_cpu_devices_changes_no_number(tmp_path) -> None:
+    """``devices=2`` (the stepping target's one device per core) splits the envs across two
+    CPU devices — asked for in a fresh process, before JAX starts — and every env's estimate
+    and return are the bits of the one-device program (and of this process's)."""
+    import os
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    out = tmp_path / "sharded.npz"
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    subprocess.run([sys.executable, "-c", SHARDED, str(out)], check=True, env=env,
+                   timeout=600)
+    got = np.load(out)
+    assert int(got["devices"]) == 2 and int(got["shards1"]) == 1 and int(got["shards2"]) == 2
+    run, keys = jax_training.stepping_program(8, 12)
+    estimate, rewards = run(keys(3))
+    for n in (1, 2):
+        np.testing.assert_array_equal(got[f"estimate{n}"], np.asarray(estimate))
+        np.testing.assert_array_equal(got[f"rewards{n}"], np.asarray(rewards))
+    assert np.isfinite(np.asarray(rewards)).all()
+
+
+def test_the_stepping_program_refuses_devices_it_cannot_use() -> None:
+    import jax
+
+    have = len(jax.devices("cpu"))
+    # in a process whose JAX has started, asking for more devices keeps what it has
+    assert jax_training.request_cpu_devices(have + 1) == have
+    with pytest.raises(ValueError, match="devices must be between 1 and"):
+        jax_training.stepping_program(8, 2, devices=have + 1)
+    with pytest.raises(ValueError, match="divide n_envs = 7; got 0"):
+        jax_training.stepping_program(7, 2, devices=0)
+    with pytest.raises(ValueError, match="mode must be one of"):
+        jax_training.stepping_program(8, 2, mode="walk")
