@@ -24,9 +24,10 @@ from __future__ import annotations
 import argparse
 
 import fir_gym  # noqa: F401  (registers the ids)
-from fir_gym.benchmarks.jax_training import MODES, request_cpu_devices
+from fir_gym.benchmarks.jax_training import MODES
 from fir_gym.benchmarks.jax_training import jax_stepping_rate as jax_rate
 from fir_gym.benchmarks.jax_training import numpy_stepping_rate as numpy_rate
+from fir_gym.cpu_devices import request_cpu_devices
 from fir_gym.machine import cores, cpu_model, load_average
 
 

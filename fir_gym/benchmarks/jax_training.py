@@ -16,9 +16,10 @@ Three ratios, each of env-steps per second measured in the same run as its refer
   native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
   (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 —
   target ≥ 2. The JAX envs are sharded across one CPU device per core
-  (:func:`request_cpu_devices`: XLA runs each device's part on its own thread, where one
-  device steps the whole batch on one core), as JAX would spread them over a GPU's cores;
-  the numpy vector env is one process (numpy's array operations run on one core). The
+  (:func:`fir_gym.cpu_devices.request_cpu_devices`: XLA runs each device's part on its own
+  thread, where one device steps the whole batch on one core), as JAX would spread them
+  over a GPU's cores; the numpy vector env is one process (numpy's array operations run on
+  one core). The
   one-device figure is reported beside it: the ratio per core. The same JAX env stepped
   with the noise given (``step_with_noise``, no key draws, no auto-reset; on the same
   devices) is the floor: the plant and the filter alone. The same ratio is
@@ -43,6 +44,8 @@ from typing import Any
 
 import numpy as np
 
+from fir_gym.cpu_devices import request_cpu_devices
+
 ENV_ID, KIND = "fir_gym/Orbit-v0", "ekf"
 #: the proportional policy both stepping measurements run: hover thrust + gain (8 − r̂)
 HOVER, GAIN, R_REF = 0.311, 0.5, 8.0
@@ -60,21 +63,6 @@ CONDITIONS: dict[str, Any] = {"randomize": {"mu": 0.1, "thrust_max": 0.1},
 def policy(obs: np.ndarray) -> np.ndarray:
     """The numpy env's actions from its estimates ``(B, 2)`` (float32, as a policy's)."""
     return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
-
-
-def request_cpu_devices(count: int) -> int:
-    """Ask JAX for ``count`` CPU devices — one per core, so that a batch sharded across them
-    (:func:`jax_stepping_rate`'s ``devices``) steps on every core: XLA runs one device's
-    program on one thread. JAX takes the count only before its backends start (before the
-    first JAX operation, and before ``import gymnax`` or :mod:`fir_gym.jax`, whose imports
-    start them); afterwards the count stays. Returns the number of CPU devices JAX has."""
-    import jax
-
-    try:
-        jax.config.update("jax_num_cpu_devices", int(count))
-    except RuntimeError:                  # the backends have started: keep what they have
-        pass
-    return len(jax.devices("cpu"))
 
 
 def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: str = "step",

@@ -50,7 +50,9 @@ def resolved_imports(path: Path) -> dict[str, list[str]]:
 ALLOWED = {("fir_gym/_commands.py", "train_jax"), ("fir_gym/_commands.py", "benchmark_jax"),
            ("fir_gym/_commands.py", "evaluate_jax"),
            ("fir_gym/robustness/benchmark.py", "run_benchmark"),
-           ("fir_gym/episode_policy.py", "trained_policy")}
+           ("fir_gym/episode_policy.py", "trained_policy"),
+           # JAX's CPU device count, set before anything starts its backends
+           ("fir_gym/cpu_devices.py", "request_cpu_devices")}
 #: modules that exist to measure the JAX backend (`fir-gym speed training`): JAX inside their
 #: functions only
 MEASURING = {"fir_gym/benchmarks/jax_training.py"}

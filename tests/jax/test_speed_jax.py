@@ -47,7 +47,8 @@ def test_the_stepping_rates_under_the_conditions_run() -> None:
 SHARDED = """
 import sys
 import numpy as np
-from fir_gym.benchmarks.jax_training import request_cpu_devices, stepping_program
+from fir_gym.benchmarks.jax_training import stepping_program
+from fir_gym.cpu_devices import request_cpu_devices
 devices = request_cpu_devices(2)
 out = {"devices": np.asarray(devices)}
 for n in (1, 2):
@@ -86,9 +87,14 @@ def test_sharding_the_envs_across_cpu_devices_changes_no_number(tmp_path) -> Non
 def test_the_stepping_program_refuses_devices_it_cannot_use() -> None:
     import jax
 
+    from fir_gym.cpu_devices import request_cpu_devices
+
     have = len(jax.devices("cpu"))
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="count must be a positive integer"):
+            request_cpu_devices(bad)
     # in a process whose JAX has started, asking for more devices keeps what it has
-    assert jax_training.request_cpu_devices(have + 1) == have
+    assert request_cpu_devices(have + 1) == have
     with pytest.raises(ValueError, match="devices must be between 1 and"):
         jax_training.stepping_program(8, 2, devices=have + 1)
     with pytest.raises(ValueError, match="divide n_envs = 7; got 0"):
