@@ -72,8 +72,9 @@ def test_sharding_the_envs_across_cpu_devices_changes_no_number(tmp_path) -> Non
 
     out = tmp_path / "sharded.npz"
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    subprocess.run([sys.executable, "-c", SHARDED, str(out)], check=True, env=env,
-                   timeout=600)
+    # -P and a cwd of its own: the installed fir_gym, not a source tree the cwd may hold
+    subprocess.run([sys.executable, "-P", "-c", SHARDED, str(out)], check=True, env=env,
+                   cwd=tmp_path, timeout=600)
     got = np.load(out)
     assert int(got["devices"]) == 2 and int(got["shards1"]) == 1 and int(got["shards2"]) == 2
     run, keys = jax_training.stepping_program(8, 12)
