@@ -110,21 +110,15 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: 
         (obs, _), rewards = jax.lax.scan(body, (obs, state), jax.random.split(k_steps, steps))
         return obs, rewards.sum()                  # the estimate (the kind's observation)
 
-    if devices == 1:
-        run = jax.jit(jax.vmap(one))
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-        def keys(seed: int) -> Any:
-            return jax.random.split(jax.random.key(seed, impl=prng), n_envs)
-    else:
-        from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    # (over one device, the plain placement: nothing is partitioned)
+    envs = NamedSharding(Mesh(np.array(available[:devices]), ("envs",)), PartitionSpec("envs"))
+    run = jax.jit(jax.vmap(one), in_shardings=envs, out_shardings=envs)
 
-        envs = NamedSharding(Mesh(np.array(available[:devices]), ("envs",)),
-                             PartitionSpec("envs"))
-        run = jax.jit(jax.vmap(one), in_shardings=envs, out_shardings=envs)
+    def keys(seed: int) -> Any:
+        return jax.device_put(jax.random.split(jax.random.key(seed, impl=prng), n_envs), envs)
 
-        def keys(seed: int) -> Any:
-            return jax.device_put(jax.random.split(jax.random.key(seed, impl=prng), n_envs),
-                                  envs)
     return run, keys
 
 
