@@ -59,6 +59,8 @@ from rejax.algos.mixins import RewardRMSState, RMSState, update_rms  # noqa: E40
 from rejax.algos.ppo import Trajectory  # noqa: E402
 from rejax.networks import GaussianPolicy  # noqa: E402
 
+from .permutation import permutation  # noqa: E402
+
 #: the parts of the recipe not matched (the module docstring says why): none since the
 #: gradient-norm clip is one over both networks (:func:`clip_jointly`)
 UNMATCHED: tuple[str, ...] = ()
@@ -294,6 +296,19 @@ class SB3LikePPO(PPO):
             ts = ts.replace(rew_rms_state=rew_rms_state)
         reward = reward + self.truncation_bootstrap(ts, info, ts.obs_rms_state)
         return ts, next_obs, env_state, reward, done
+
+    def shuffle_and_split(self, data: Any, rng: Any) -> Any:
+        """rejax's ``shuffle_and_split``: the iteration's samples permuted, then cut into the
+        minibatches — the permutation ``jax.random.permutation(rng, n)``'s integers, drawn by
+        :func:`fir_gym.jax.permutation.permutation` (XLA's CPU backend sorted the samples
+        in about a quarter of PPO's own time; this sort is 4.7 times as fast)."""
+        order = permutation(rng, self.iteration_size)
+
+        def split(x: Any) -> Any:
+            x = jnp.take(x.reshape((self.iteration_size, *x.shape[2:])), order, axis=0)
+            return x.reshape(self.num_minibatches, -1, *x.shape[1:])
+
+        return jax.tree.map(split, data)
 
     def update(self, ts: Any, batch: Any) -> Any:
         """One minibatch's step, as SB3's ``PPO.train``: the gradients of the policy loss
