@@ -92,6 +92,7 @@ from ._plant import (
 from ._x64 import require_x64
 from .filter_model import FilterModel
 from .kalman import factored_joseph, symmetrize
+from .stacked_loop import stacked_fori_loop
 
 #: the true gravitational parameter and the one the filter's model believes (paper 000)
 TRUE_MU = 19.92244165
@@ -249,7 +250,7 @@ def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Arra
         return (*_substep(r, v, a, mu, euler_dt), *_jacobian_substep(r, mu, euler_dt, tuple(J)))
 
     one, zero = jnp.ones_like(x[0]), jnp.zeros_like(x[0])
-    r, v, j11, j12, j21, j22 = jax.lax.fori_loop(0, substeps, body,
+    r, v, j11, j12, j21, j22 = stacked_fori_loop(0, substeps, body,
                                                  (x[0], x[1], one, zero, zero, one),
                                                  unroll=_unroll(substeps))
     return jnp.stack([r, v]), jnp.array([[j11, j12], [j21, j22]])
@@ -261,7 +262,7 @@ def orbit_plant_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: ja
     def body(_: Any, carry: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
         return _substep(*carry, a, mu, euler_dt)
 
-    r, v = jax.lax.fori_loop(0, substeps, body, (x[0], x[1]), unroll=_unroll(substeps))
+    r, v = stacked_fori_loop(0, substeps, body, (x[0], x[1]), unroll=_unroll(substeps))
     return jnp.stack([r, v])
 
 
@@ -279,7 +280,7 @@ def orbit_plant_and_model_intervals(x: jax.Array, a: jax.Array, mu: jax.Array,
                 *_jacobian_substep(rf, muf, euler_dtf, tuple(J)))
 
     one, zero = jnp.ones_like(xf[0]), jnp.zeros_like(xf[0])
-    r, v, rf, vf, j11, j12, j21, j22 = jax.lax.fori_loop(
+    r, v, rf, vf, j11, j12, j21, j22 = stacked_fori_loop(
         0, substeps, body, (x[0], x[1], xf[0], xf[1], one, zero, zero, one),
         unroll=_unroll(substeps))
     return jnp.stack([r, v]), jnp.stack([rf, vf]), jnp.array([[j11, j12], [j21, j22]])
