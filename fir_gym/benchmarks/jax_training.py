@@ -11,10 +11,13 @@ Three ratios, each of env-steps per second measured in the same run as its refer
 * **recurrent** (no target): the ``recurrent`` kind's training, JAX's RecurrentPPO
   (:mod:`fir_gym.jax.recurrent_ppo`) against sb3-contrib's, both at ``ppo_lstm.yml`` on the
   raw measurement of Orbit-v0;
-* **stepping**: the JAX Orbit-v0 + EKF, gymnax's auto-resetting ``step`` vmapped over 2048
-  envs and scanned over the steps (a proportional policy on the estimate), against the
+* **stepping**: the JAX Orbit-v0 + EKF, 2048 envs stepped as a batch with the resets
+  computed only where an episode ended (:func:`fir_gym.jax.batch_step.batch_step`; gymnax's
+  auto-resetting ``step`` vmapped — the same numbers — is reported beside it) and scanned over
+  the steps (a proportional policy on the estimate), against the
   native numpy vector env with :class:`~fir_gym.wrappers.VectorEstimatorObservation`
-  (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 —
+  (``"ekf"``) running the same policy at its best batch size among 256, 1024 and 4096 (it,
+  too, resets only the envs whose episode ended) —
   target ≥ 2. The JAX envs are sharded across one CPU device per core
   (:func:`fir_gym.cpu_devices.request_cpu_devices`: XLA runs each device's part on its own
   thread, where one device steps the whole batch on one core), as JAX would spread them
@@ -49,9 +52,14 @@ from fir_gym.cpu_devices import request_cpu_devices
 ENV_ID, KIND = "fir_gym/Orbit-v0", "ekf"
 #: the proportional policy both stepping measurements run: hover thrust + gain (8 − r̂)
 HOVER, GAIN, R_REF = 0.311, 0.5, 8.0
-#: what a JAX step is: gymnax's ``step`` (noise drawn, auto-reset: what training runs),
-#: ``step_env`` (noise drawn, no auto-reset) or ``step_with_noise`` (zero noise given)
-MODES = ("step", "step_env", "step_with_noise")
+#: what a JAX step is: :func:`fir_gym.jax.batch_step.batch_step` (``"batch_step"``: the
+#: batch stepped, the resets computed only where an episode ended — what the target row
+#: measures), gymnax's ``step`` vmapped (``"step"``: every env's reset computed at every step,
+#: a select keeps it where the episode ended; the same numbers), ``step_env`` (noise drawn,
+#: no auto-reset) or ``step_with_noise`` (zero noise given)
+MODES = ("batch_step", "step", "step_env", "step_with_noise")
+#: the modes that auto-reset (the conditions' draws happen at the resets)
+AUTO_RESET = ("batch_step", "step")
 JAX_ENVS = 2048
 NUMPY_BATCHES = (256, 1024, 4096)
 #: the conditions of the second stepping ratio: the robustness benchmark's dr-mismatch and
@@ -65,25 +73,29 @@ def policy(obs: np.ndarray) -> np.ndarray:
     return np.clip(HOVER - GAIN * (obs[:, :1] - R_REF), -1.0, 1.0).astype(np.float32)
 
 
-def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: str = "step",
+def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32",
+                     mode: str = "batch_step",
                      conditions: bool = False, devices: int = 1
                      ) -> tuple[Any, Any]:
     """``(run, keys)``: the jitted closed loop of :func:`jax_stepping_rate` — ``run(keys(i))``
     steps ``n_envs`` Orbit-v0 + EKF envs ``steps`` times from the keys of seed ``i`` and
     returns each env's last estimate and summed reward. ``devices > 1`` shards the envs
-    evenly across the first ``devices`` CPU devices (:func:`request_cpu_devices`); each env's
-    numbers do not depend on it (one env's keys and arithmetic are the same on any device)."""
+    evenly across the first ``devices`` CPU devices (:func:`request_cpu_devices`; under
+    ``"batch_step"`` each device steps its envs as a batch of its own); each env's numbers
+    depend neither on it nor on the mode among :data:`AUTO_RESET` (one env's keys and
+    arithmetic are the same)."""
     import jax
     import jax.numpy as jnp
 
     from fir_gym.jax import make
+    from fir_gym.jax.batch_step import batch_step
     from fir_gym.jax.orbit import OrbitNoise
 
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
-    if conditions and mode != "step":
-        raise ValueError(f"conditions are drawn by the env's step: mode must be 'step'; got "
-                         f"{mode!r}")
+    if conditions and mode not in AUTO_RESET:
+        raise ValueError(f"conditions are drawn at the resets: mode must be one of "
+                         f"{AUTO_RESET}; got {mode!r}")
     available = jax.devices("cpu")
     if not 1 <= devices <= len(available) or n_envs % devices:
         raise ValueError(f"devices must be between 1 and the {len(available)} CPU device(s) "
@@ -92,13 +104,31 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: 
     env, params = make(ENV_ID, "ekf", **(CONDITIONS if conditions else {}))
     zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
 
+    def act(obs: Any) -> Any:
+        return jnp.clip(HOVER - GAIN * (obs[..., :1] - R_REF), -1.0, 1.0)
+
+    def batch(keys: Any) -> Any:
+        """The envs of ``keys`` stepped as one batch (:func:`batch_step`), each from the same
+        keys as :func:`one` gives it."""
+        split = jax.vmap(jax.random.split)(keys)
+        obs, state = jax.vmap(env.reset, in_axes=(0, None))(split[:, 0], params)
+        step_keys = jax.vmap(lambda k: jax.random.split(k, steps))(split[:, 1])
+
+        def body(carry: Any, keys: Any) -> Any:
+            obs, state = carry
+            obs, state, reward, _, _, _ = batch_step(env, keys, state, act(obs), params)
+            return (obs, state), reward
+
+        (obs, _), rewards = jax.lax.scan(body, (obs, state), jnp.swapaxes(step_keys, 0, 1))
+        return obs, rewards.sum(axis=0)
+
     def one(key: Any) -> Any:
         k_reset, k_steps = jax.random.split(key)
         obs, state = env.reset(k_reset, params)
 
         def body(carry: Any, key: Any) -> Any:
             obs, state = carry
-            action = jnp.clip(HOVER - GAIN * (obs[:1] - R_REF), -1.0, 1.0)
+            action = act(obs)
             if mode == "step":
                 obs, state, reward, _, _, _ = env.step(key, state, action, params)
             elif mode == "step_env":
@@ -112,9 +142,15 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: 
 
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    # (over one device, the plain placement: nothing is partitioned)
-    envs = NamedSharding(Mesh(np.array(available[:devices]), ("envs",)), PartitionSpec("envs"))
-    run = jax.jit(jax.vmap(one), in_shardings=envs, out_shardings=envs)
+    # (over one device, the plain placement: nothing is partitioned; the batch step runs per
+    # device without shard_map's varying-axes check, which the envs' loops from constants fail)
+    mesh = Mesh(np.array(available[:devices]), ("envs",))
+    envs = NamedSharding(mesh, PartitionSpec("envs"))
+    program = (jax.shard_map(batch, mesh=mesh, in_specs=PartitionSpec("envs"),
+                             out_specs=PartitionSpec("envs"), check_vma=False)
+               if mode == "batch_step"
+               else jax.vmap(one))
+    run = jax.jit(program, in_shardings=envs, out_shardings=envs)
 
     def keys(seed: int) -> Any:
         return jax.device_put(jax.random.split(jax.random.key(seed, impl=prng), n_envs), envs)
@@ -123,11 +159,11 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32", mode: 
 
 
 def jax_stepping_rate(n_envs: int, steps: int, reps: int, prng: str = "threefry2x32",
-                      mode: str = "step", conditions: bool = False, devices: int = 1
+                      mode: str = "batch_step", conditions: bool = False, devices: int = 1
                       ) -> tuple[float, float]:
     """(env-steps/s of the jitted, vmapped Orbit+EKF env — best of ``reps`` —, compile
     seconds); ``prng`` is the keys' implementation, ``mode`` one of :data:`MODES`,
-    ``conditions`` the env under :data:`CONDITIONS` (mode ``"step"`` only), ``devices`` the
+    ``conditions`` the env under :data:`CONDITIONS` (modes :data:`AUTO_RESET`), ``devices`` the
     CPU devices the envs are sharded across (:func:`stepping_program`)."""
     import jax
 
@@ -325,6 +361,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     one_device, compile_s = jax_stepping_rate(n_envs, steps, reps)
     stepping = (jax_stepping_rate(n_envs, steps, reps, devices=devices)[0] if devices > 1
                 else one_device)
+    vmapped, _ = jax_stepping_rate(n_envs, steps, reps, mode="step", devices=devices)
     floor, _ = jax_stepping_rate(n_envs, steps, reps, mode="step_with_noise", devices=devices)
     numpy_faulty = numpy_stepping_rate(best_batch, max(5, steps * 256 // best_batch), reps,
                                        conditions=True)
@@ -345,6 +382,8 @@ def run(quick: bool = False) -> dict[str, Any]:
             "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
                          "jax_envs": n_envs, "jax_devices": devices,
                          "jax_steps_per_s": stepping, "jax_one_device_steps_per_s": one_device,
+                         "jax_gymnax_step_steps_per_s": vmapped,
+                         "ratio_gymnax_step": vmapped / numpy_rates[best_batch],
                          "jax_compile_seconds": compile_s, "jax_given_noise_steps_per_s": floor,
                          "ratio": stepping / numpy_rates[best_batch],
                          "ratio_one_device": one_device / numpy_rates[best_batch],
@@ -379,6 +418,10 @@ def print_results(res: dict[str, Any]) -> None:
              s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_one_device_steps_per_s"],
              s["ratio_one_device"], "—", "per core"]]
            if s.get("jax_devices", 1) > 1 else [])
+        + ([["  the same, gymnax's step vmapped (every env's reset computed at every step)",
+             s["numpy_steps_per_s"][s["numpy_best_batch"]], s["jax_gymnax_step_steps_per_s"],
+             s["ratio_gymnax_step"], "—", "the same numbers"]]
+           if "jax_gymnax_step_steps_per_s" in s else [])
         + ([[f"stepping under mismatch 0.1 + dropout 0.3, JAX {c['jax_envs']} envs on "
              f"{cpus(c)} / numpy {c['numpy_batch']} envs", c["numpy_steps_per_s"],
              c["jax_steps_per_s"], c["ratio"], "—",

@@ -40,8 +40,22 @@ def test_the_stepping_rates_under_the_conditions_run() -> None:
     rate, _ = jax_training.jax_stepping_rate(8, 4, 2, conditions=True)
     numpy_rate = jax_training.numpy_stepping_rate(8, 4, 1, conditions=True)
     assert math.isfinite(rate) and rate > 0 and math.isfinite(numpy_rate) and numpy_rate > 0
-    with pytest.raises(ValueError, match="mode must be 'step'"):
+    with pytest.raises(ValueError, match="mode must be one of .'batch_step', 'step'."):
         jax_training.jax_stepping_rate(8, 4, 1, mode="step_env", conditions=True)
+
+
+@pytest.mark.parametrize("conditions", [False, True])
+def test_the_batch_step_program_is_the_vmapped_step_program(conditions: bool) -> None:
+    """The target row's batch step and gymnax's step vmapped: every env's estimate and
+    return the same bits (fir_gym.jax.batch_step is tested through episode ends in
+    tests/jax/test_batch_step.py)."""
+    import numpy as np
+
+    got = {mode: jax_training.stepping_program(8, 12, mode=mode, conditions=conditions)
+           for mode in jax_training.AUTO_RESET}
+    results = {mode: run(keys(4)) for mode, (run, keys) in got.items()}
+    for a, b in zip(results["batch_step"], results["step"], strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
 SHARDED = """
@@ -63,7 +77,8 @@ np.savez(sys.argv[1], **out)
 def test_sharding_the_envs_across_cpu_devices_changes_no_number(tmp_path) -> None:
     """``devices=2`` (the stepping target's one device per core) splits the envs across two
     CPU devices — asked for in a fresh process, before JAX starts — and every env's estimate
-    and return are the bits of the one-device program (and of this process's)."""
+    and return are the bits of the one-device program (the batch step, each device a batch
+    of its own) and of this process's gymnax step vmapped."""
     import os
     import subprocess
     import sys
@@ -77,7 +92,7 @@ def test_sharding_the_envs_across_cpu_devices_changes_no_number(tmp_path) -> Non
                    cwd=tmp_path, timeout=600)
     got = np.load(out)
     assert int(got["devices"]) == 2 and int(got["shards1"]) == 1 and int(got["shards2"]) == 2
-    run, keys = jax_training.stepping_program(8, 12)
+    run, keys = jax_training.stepping_program(8, 12, mode="step")   # gymnax's step vmapped
     estimate, rewards = run(keys(3))
     for n in (1, 2):
         np.testing.assert_array_equal(got[f"estimate{n}"], np.asarray(estimate))
