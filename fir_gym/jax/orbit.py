@@ -259,7 +259,7 @@ def orbit_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Arra
 def orbit_plant_interval(x: jax.Array, a: jax.Array, mu: jax.Array, euler_dt: jax.Array,
                          substeps: int) -> jax.Array:
     """:func:`orbit_interval` without the Jacobian (the plant's map, ``OrbitDynamics.f``)."""
-    def body(_: Any, carry: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
+    def body(_: Any, carry: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
         return _substep(*carry, a, mu, euler_dt)
 
     r, v = stacked_fori_loop(0, substeps, body, (x[0], x[1]), unroll=_unroll(substeps))

@@ -70,10 +70,10 @@ def test_default_slots() -> None:
 def test_batch_step_refuses() -> None:
     env, params = make("fir_gym/Orbit-v0", "ekf")
     keys = jax.random.split(jax.random.key(0), 4)
-    obs, states = jax.vmap(env.reset, in_axes=(0, None))(keys, params)
+    _, states = jax.vmap(env.reset, in_axes=(0, None))(keys, params)
     actions = jnp.zeros((4, 1))
     for slots in (0, 5, 2.0, True):
         with pytest.raises(ValueError, match="slots must be an integer from 1 to the batch's 4"):
             batch_step(env, keys, states, actions, params, slots)  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="env must step as gymnax's Environment.step"):
+    with pytest.raises(ValueError, match=r"env must step as gymnax's Environment\.step"):
         batch_step(Gymnax0(env), keys, states, actions, params)

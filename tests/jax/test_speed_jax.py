@@ -40,7 +40,7 @@ def test_the_stepping_rates_under_the_conditions_run() -> None:
     rate, _ = jax_training.jax_stepping_rate(8, 4, 2, conditions=True)
     numpy_rate = jax_training.numpy_stepping_rate(8, 4, 1, conditions=True)
     assert math.isfinite(rate) and rate > 0 and math.isfinite(numpy_rate) and numpy_rate > 0
-    with pytest.raises(ValueError, match="mode must be one of .'batch_step', 'step'."):
+    with pytest.raises(ValueError, match=r"mode must be one of \('batch_step', 'step'\)"):
         jax_training.jax_stepping_rate(8, 4, 1, mode="step_env", conditions=True)
 
 
