@@ -10,7 +10,8 @@
 # What it prints, in order (about 10 minutes on one recent GPU, compilation included —
 # an estimate: it has not been run on a GPU yet):
 #   1. the device JAX sees (the script stops if it is not a GPU);
-#   2. raw stepping of Orbit-v0 + EKF, gymnax's auto-resetting step vmapped over 4096 envs,
+#   2. raw stepping of Orbit-v0 + EKF at 4096 envs on the GPU — the batch step (the resets only
+#      where an episode ended), gymnax's auto-resetting step vmapped, and the noise given —
 #      against the numpy native vector env on this machine's CPU (scripts/jax_stepping_speed.py);
 #   3. PPO at the shipped recipe with 4096 envs (one seed; the minibatch size stays the
 #      recipe's 1024) and with 16 envs, against stable-baselines3 on the CPU
@@ -36,7 +37,7 @@ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader ||
 
 echo "== 2. stepping Orbit-v0 + EKF at 4096 envs"
 python "$here/jax_stepping_speed.py" --envs 4096 --steps 200 --reps 3 \
-  --numpy-batches 256 1024 4096 --modes step step_with_noise
+  --numpy-batches 256 1024 4096 --modes batch_step step step_with_noise
 
 echo "== 3. PPO: 4096 envs (JAX only), then 16 envs against stable-baselines3"
 python "$here/jax_training_speed.py" --n-envs 4096 --steps 4194304 --skip-sb3

@@ -43,8 +43,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--prng", nargs="+", default=["threefry2x32"],
                         choices=["threefry2x32", "rbg", "unsafe_rbg"],
                         help="JAX key implementation(s) to time (default threefry2x32)")
-    parser.add_argument("--modes", nargs="+", default=["step"], choices=MODES,
-                        help="JAX step(s) to time (default: gymnax's step, with auto-reset)")
+    parser.add_argument("--modes", nargs="+", default=["batch_step"], choices=MODES,
+                        help="JAX step(s) to time (default: batch_step, the target's: the "
+                             "resets only where an episode ended; step: gymnax's step "
+                             "vmapped)")
     parser.add_argument("--devices", type=int, nargs="+", default=[1],
                         help="CPU devices the JAX envs are sharded across, one figure each "
                              "(default 1; JAX is given the largest number before it starts)")

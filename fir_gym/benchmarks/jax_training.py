@@ -80,7 +80,8 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32",
     """``(run, keys)``: the jitted closed loop of :func:`jax_stepping_rate` — ``run(keys(i))``
     steps ``n_envs`` Orbit-v0 + EKF envs ``steps`` times from the keys of seed ``i`` and
     returns each env's last estimate and summed reward. ``devices > 1`` shards the envs
-    evenly across the first ``devices`` CPU devices (:func:`request_cpu_devices`; under
+    evenly across the first ``devices`` devices of JAX's default backend (a GPU's where there
+    is one; on a CPU, one device per core: :func:`request_cpu_devices`; under
     ``"batch_step"`` each device steps its envs as a batch of its own); each env's numbers
     depend neither on it nor on the mode among :data:`AUTO_RESET` (one env's keys and
     arithmetic are the same)."""
@@ -96,10 +97,11 @@ def stepping_program(n_envs: int, steps: int, prng: str = "threefry2x32",
     if conditions and mode not in AUTO_RESET:
         raise ValueError(f"conditions are drawn at the resets: mode must be one of "
                          f"{AUTO_RESET}; got {mode!r}")
-    available = jax.devices("cpu")
+    available = jax.devices()              # the default backend's: a GPU's where there is one
     if not 1 <= devices <= len(available) or n_envs % devices:
-        raise ValueError(f"devices must be between 1 and the {len(available)} CPU device(s) "
-                         f"JAX has (request_cpu_devices) and divide n_envs = {n_envs}; got "
+        raise ValueError(f"devices must be between 1 and the {len(available)} "
+                         f"{available[0].platform.upper()} device(s) JAX has "
+                         f"(request_cpu_devices on a CPU) and divide n_envs = {n_envs}; got "
                          f"{devices!r}")
     env, params = make(ENV_ID, "ekf", **(CONDITIONS if conditions else {}))
     zero = OrbitNoise(jnp.zeros(2), jnp.zeros(1))
@@ -333,7 +335,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     from fir_gym.machine import cores
 
     try:
-        import jax  # noqa: F401
+        import jax
     except ImportError as err:
         return {"skipped": f"needs the jax and rl extras ({err.name} is missing)"}
     # one CPU device per core, asked for before gymnax's import starts JAX's backends (in a
@@ -356,6 +358,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     numpy_rates = {b: numpy_stepping_rate(b, max(5, steps * 256 // b), reps) for b in batches}
     best_batch = max(numpy_rates, key=lambda b: numpy_rates[b])
     n_envs = 256 if quick else JAX_ENVS
+    devices = min(devices, len(jax.devices()))    # a GPU machine steps on its GPU(s)
     while n_envs % devices:                        # the envs split evenly across devices
         devices -= 1
     one_device, compile_s = jax_stepping_rate(n_envs, steps, reps)
@@ -381,6 +384,7 @@ def run(quick: bool = False) -> dict[str, Any]:
                     "ceiling": jax_free["rate"] / sb3["rate"], "steps": ppo_steps},
             "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
                          "jax_envs": n_envs, "jax_devices": devices,
+                         "jax_platform": jax.devices()[0].platform,
                          "jax_steps_per_s": stepping, "jax_one_device_steps_per_s": one_device,
                          "jax_gymnax_step_steps_per_s": vmapped,
                          "ratio_gymnax_step": vmapped / numpy_rates[best_batch],
@@ -390,7 +394,9 @@ def run(quick: bool = False) -> dict[str, Any]:
                          "ceiling": floor / numpy_rates[best_batch]},
             "stepping_conditions": {"numpy_steps_per_s": numpy_faulty,
                                     "numpy_batch": best_batch, "jax_envs": n_envs,
-                                    "jax_devices": devices, "jax_steps_per_s": faulty,
+                                    "jax_devices": devices,
+                                    "jax_platform": jax.devices()[0].platform,
+                                    "jax_steps_per_s": faulty,
                                     "ratio": faulty / numpy_faulty}}
 
 
@@ -434,9 +440,10 @@ def print_results(res: dict[str, Any]) -> None:
 
 
 def cpus(stepping: dict[str, Any]) -> str:
-    """How many CPU devices a stepping figure used, in words."""
-    n = stepping.get("jax_devices", 1)
-    return "one CPU device" if n == 1 else f"{n} CPU devices (one per core)"
+    """How many devices a stepping figure used, in words (CPU devices: one per core)."""
+    n, platform = stepping.get("jax_devices", 1), stepping.get("jax_platform", "cpu").upper()
+    per_core = " (one per core)" if platform == "CPU" else ""
+    return f"one {platform} device" if n == 1 else f"{n} {platform} devices{per_core}"
 
 
 def targets(res: dict[str, Any]) -> list[tuple[str, float | None, float, float | None]]:

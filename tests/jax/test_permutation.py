@@ -48,3 +48,27 @@ def test_stable_order_is_a_stable_key_value_sort(values: int) -> None:
         # and the oracle that shares nothing with XLA: numpy's stable argsort
         np.testing.assert_array_equal(np.asarray(stable_order(keys)),
                                       np.argsort(np.asarray(keys), kind="stable"))
+
+
+def test_ppo_minibatches_are_rejaxs() -> None:
+    """SB3LikePPO's ``shuffle_and_split`` (this permutation) cuts the same minibatches as
+    rejax's own (``jax.random.permutation``), on a rollout-shaped batch."""
+    pytest.importorskip("rejax")
+    from rejax.algos.mixins import OnPolicyMixin
+
+    from fir_gym.jax import train as jt
+
+    env, params = jt.make_env("fir_gym/Orbit-v0", "ekf")
+    algo = jt.make_algorithm(env, params, jt.recipe("fir_gym/Orbit-v0", steps=8192))
+    steps, envs = algo.num_steps, algo.num_envs
+    rng = np.random.default_rng(1)
+    data = {"obs": jnp.asarray(rng.normal(size=(steps, envs, 2))),
+            "done": jnp.asarray(rng.random((steps, envs)) < 0.1)}
+    for seed in range(3):
+        key = jax.random.key(seed)
+        ours = algo.shuffle_and_split(data, key)
+        theirs = OnPolicyMixin.shuffle_and_split(algo, data, key)
+        for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs), strict=True):
+            assert a.shape == b.shape == (algo.num_minibatches, steps * envs
+                                          // algo.num_minibatches, *a.shape[2:])
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -117,3 +117,11 @@ def test_the_stepping_program_refuses_devices_it_cannot_use() -> None:
         jax_training.stepping_program(7, 2, devices=0)
     with pytest.raises(ValueError, match="mode must be one of"):
         jax_training.stepping_program(8, 2, mode="walk")
+
+
+def test_the_stepping_rows_name_the_devices() -> None:
+    """The row label says which devices stepped (JSON from before the platform field: CPU)."""
+    assert jax_training.cpus({"jax_devices": 2}) == "2 CPU devices (one per core)"
+    assert jax_training.cpus({}) == "one CPU device"
+    assert jax_training.cpus({"jax_devices": 1, "jax_platform": "gpu"}) == "one GPU device"
+    assert jax_training.cpus({"jax_devices": 4, "jax_platform": "gpu"}) == "4 GPU devices"
