@@ -44,7 +44,14 @@ def batch_step(env: Any, keys: jax.Array, states: Any, actions: jax.Array, param
     if type(env).step is not gymnax_env.Environment.step:
         raise ValueError(f"env must step as gymnax's Environment.step (batch_step computes "
                          f"what it computes); {type(env).__name__} has a step of its own")
+    typed = jax.dtypes.issubdtype(keys.dtype, jax.dtypes.prng_key)
+    if keys.ndim != (1 if typed else 2):
+        raise ValueError(f"keys must be one key per env (jax.random.split(key, n_envs)); got "
+                         f"an array of shape {keys.shape} and dtype {keys.dtype}")
     n = keys.shape[0]
+    if jnp.ndim(actions) < 1 or jnp.shape(actions)[0] != n:
+        raise ValueError(f"actions must have one row per env ({n}); got shape "
+                         f"{jnp.shape(actions)}")
     slots = default_slots(n) if slots is None else slots
     if isinstance(slots, bool) or not isinstance(slots, int) or not 1 <= slots <= n:
         raise ValueError(f"slots must be an integer from 1 to the batch's {n} envs; got "

@@ -77,3 +77,10 @@ def test_batch_step_refuses() -> None:
             batch_step(env, keys, states, actions, params, slots)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"env must step as gymnax's Environment\.step"):
         batch_step(Gymnax0(env), keys, states, actions, params)
+    with pytest.raises(ValueError, match="keys must be one key per env"):
+        batch_step(env, jax.random.key(0), states, actions, params)
+    with pytest.raises(ValueError, match=r"actions must have one row per env \(4\)"):
+        batch_step(env, keys, states, jnp.zeros((3, 1)), params)
+    # raw uint32 keys (jax.random.PRNGKey) are one key per row
+    raw = jax.random.split(jax.random.PRNGKey(0), 4)
+    assert batch_step(env, raw, states, actions, params)[0].shape == (4, 2)
