@@ -8,9 +8,9 @@ written out and read back). Stacked into one array, the entries of a substep are
 value: the body fuses into a few loops over the batch. Orbit-v0's Euler interval with its
 Jacobian ran 1.7 times as fast at 2048 envs (the development machine).
 
-The operations are the same, in the same order, but the bits are the same only where XLA
-contracts the same multiplies and adds into fused multiply-adds in both fusings, which is
-not promised: Orbit-v0's three loops give the same bits (``tests/jax/test_stacked_loop.py``
+The operations are the same, in the same order, but the fusing is not, and the bits need
+not be (most likely through which multiplies and adds XLA contracts into fused
+multiply-adds): Orbit-v0's three loops give the same bits (``tests/jax/test_stacked_loop.py``
 steps them both ways), VanDerPol-v0's Heun loops did not (2e-11 apart in the EKF's estimate
 over 300 steps) and keep the plain loop, so that its results stay those of earlier versions.
 """
