@@ -359,6 +359,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     best_batch = max(numpy_rates, key=lambda b: numpy_rates[b])
     n_envs = 256 if quick else JAX_ENVS
     devices = min(devices, len(jax.devices()))    # a GPU machine steps on its GPU(s)
+    platform = jax.devices()[0].platform
     while n_envs % devices:                        # the envs split evenly across devices
         devices -= 1
     one_device, compile_s = jax_stepping_rate(n_envs, steps, reps)
@@ -384,7 +385,7 @@ def run(quick: bool = False) -> dict[str, Any]:
                     "ceiling": jax_free["rate"] / sb3["rate"], "steps": ppo_steps},
             "stepping": {"numpy_steps_per_s": numpy_rates, "numpy_best_batch": best_batch,
                          "jax_envs": n_envs, "jax_devices": devices,
-                         "jax_platform": jax.devices()[0].platform,
+                         "jax_platform": platform,
                          "jax_steps_per_s": stepping, "jax_one_device_steps_per_s": one_device,
                          "jax_gymnax_step_steps_per_s": vmapped,
                          "ratio_gymnax_step": vmapped / numpy_rates[best_batch],
@@ -395,7 +396,7 @@ def run(quick: bool = False) -> dict[str, Any]:
             "stepping_conditions": {"numpy_steps_per_s": numpy_faulty,
                                     "numpy_batch": best_batch, "jax_envs": n_envs,
                                     "jax_devices": devices,
-                                    "jax_platform": jax.devices()[0].platform,
+                                    "jax_platform": platform,
                                     "jax_steps_per_s": faulty,
                                     "ratio": faulty / numpy_faulty}}
 

@@ -63,15 +63,13 @@ def batch_step(env: Any, keys: jax.Array, states: Any, actions: jax.Array, param
     truncated = jax.vmap(env.is_truncated, in_axes=(0, None))(state_st, params)
     done = jnp.logical_or(terminated, truncated)
 
-    def keep(done: jax.Array, reset: Any, stepped: Any) -> Any:
+    def select(reset: jax.Array, stepped: jax.Array) -> jax.Array:
         """The reset where ``done``, the step elsewhere (gymnax's select, per env)."""
-        def select(r: jax.Array, s: jax.Array) -> jax.Array:
-            return jnp.where(done.reshape(done.shape + (1,) * (s.ndim - 1)), r, s)
-        return jax.tree.map(select, reset, stepped)
+        return jnp.where(done.reshape(done.shape + (1,) * (stepped.ndim - 1)), reset, stepped)
 
     def every_env(_: Any) -> tuple[Any, Any]:
         obs_re, state_re = jax.vmap(env.reset_env, in_axes=(0, None))(key_reset, params)
-        return keep(done, obs_re, obs_st), keep(done, state_re, state_st)
+        return jax.tree.map(select, obs_re, obs_st), jax.tree.map(select, state_re, state_st)
 
     def ended_only(_: Any) -> tuple[Any, Any]:
         at = jnp.nonzero(done, size=slots, fill_value=n)[0]      # n: an empty place
