@@ -31,6 +31,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from fir_gym.robustness.plan import EVAL_SEED
 from fir_gym.tables import format_table
 from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS, chosen_kinds
@@ -183,9 +185,10 @@ def lqg_row(env_id: str, episodes: int, seed: int = EVAL_SEED) -> dict[str, Any]
 
 def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
                       ) -> list[list[float]]:
-    """Each trained seed's deterministic policy played in the *numpy* env (``make_single_env``,
-    as ``fir-gym evaluate`` and the SB3 benchmark build it) on the SB3 evaluation's episodes
-    (episode ``i`` from ``reset(seed=seed + i)``): ``[seed][episode]`` raw returns.
+    """Each trained seed's deterministic policy played in the *numpy* env on the SB3
+    evaluation's episodes (episode ``i`` is the one a single env — ``make_single_env``, as
+    ``fir-gym evaluate`` and the SB3 benchmark build it — plays from ``reset(seed=seed +
+    i)``): ``[seed][episode]`` raw returns.
 
     ``result``: a :class:`fir_gym.jax.train.JaxTraining` with its train state — just trained
     (:func:`fir_gym.jax.train.train`) or read from a run folder
@@ -195,36 +198,62 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
     clipped to the action box (:meth:`fir_gym.jax.train.Policy.mean_action`). The JAX and
     the numpy plants agree given the same noise (the parity tests), so these returns differ
     from the SB3 backend's only by the controllers — the same episodes, not merely the same
-    distribution."""
+    distribution.
+
+    A seed's episodes are played side by side, one single env each, and the policy acts on
+    all their observations in one call, each row as a batch of one
+    (:class:`~fir_gym.jax.policy.JaxPolicy`'s ``rowwise``): the returns are, bit for bit,
+    those of the episodes played one at a time (``tests/jax/test_run_folder.py``), with a
+    twentieth of the policy's calls. (The plants' vector envs play the same episodes too, but
+    CarrierMotion-v0's and PendulumSlider-v0's batched arithmetic differs from the single
+    env's in the last bits.)"""
     from fir_gym.training.vec_env import make_single_env
 
     from .policy import JaxPolicy
 
-    plant = dict(result.env_kwargs)
-    policies = JaxPolicy.every_seed(result)
-    kind, options = result.kind, dict(result.kind_kwargs)
-    env = (make_single_env(result.env_id, observation="true", **plant) if kind == "true"
-           else make_single_env(result.env_id, **plant) if kind in ("measurement", "recurrent")
-           else make_single_env(result.env_id, observation="measurement-stack",
-                                stack_horizon=options.get("horizon"), **plant)
-           if kind == "measurement-stack"
-           else make_single_env(result.env_id, estimator=kind, estimator_kwargs=options,
-                                **plant))
-    out = []
+    plant, options, kind = dict(result.env_kwargs), dict(result.kind_kwargs), result.kind
+
+    def single_env() -> Any:
+        if kind == "true":
+            return make_single_env(result.env_id, observation="true", **plant)
+        if kind in ("measurement", "recurrent"):
+            return make_single_env(result.env_id, **plant)
+        if kind == "measurement-stack":
+            return make_single_env(result.env_id, observation="measurement-stack",
+                                   stack_horizon=options.get("horizon"), **plant)
+        return make_single_env(result.env_id, estimator=kind, estimator_kwargs=options,
+                               **plant)
+
+    envs = [single_env() for _ in range(episodes)]
     try:
-        for policy in policies:
-            returns = []
-            for episode in range(episodes):
-                obs, _ = env.reset(seed=seed + episode)
-                total, done, act = 0.0, False, policy.episode()
-                while not done:
-                    obs, reward, terminated, truncated, _ = env.step(act(obs))
-                    total, done = total + float(reward), terminated or truncated
-                returns.append(total)
-            out.append(returns)
+        return [_play_side_by_side(envs, policy, seed)
+                for policy in JaxPolicy.every_seed(result, rowwise=True)]
     finally:
-        env.close()
-    return out
+        for env in envs:
+            env.close()
+
+
+def _play_side_by_side(envs: list[Any], policy: Any, seed: int) -> list[float]:
+    """One episode in each of ``envs`` (env ``i`` from ``reset(seed=seed + i)``) under
+    ``policy`` (a rowwise :class:`~fir_gym.jax.policy.JaxPolicy`): the raw returns. An env
+    whose episode has ended keeps its last observation in the batch; its row's action is
+    not used."""
+    obs = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
+    totals = [0.0] * len(envs)
+    live = list(range(len(envs)))
+    start = np.ones(len(envs), dtype=bool)
+    state = None
+    while live:
+        actions, state = policy(np.stack(obs), start, state)
+        start = np.zeros(len(envs), dtype=bool)
+        still = []
+        for i in live:
+            obs[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
+            totals[i] += float(reward)
+            if not (terminated or truncated):
+                still.append(i)
+        live = still
+    return totals
 
 
 def _sb3_tables(source: str | Path) -> dict[str, dict[str, dict[str, Any]]]:

@@ -6,6 +6,9 @@ statistics, and acts as stable-baselines3's ``model.predict(obs, deterministic=T
 ``VecNormalize`` does: the observation normalised with the run's final statistics (and
 clipped), the Gaussian's mean clipped to the action box
 (:meth:`fir_gym.jax.train.Policy.mean_action`), one jitted call per batch of observations.
+A batch's actions are the batched products' (XLA's, which differ from a batch of one's in
+float32's last bits), or with ``rowwise=True`` each row's computed as a batch of one in a
+compiled loop over the rows: bit for bit the actions of one observation at a time.
 It is the policy of ``fir-gym evaluate`` on a JAX run folder and of the JAX benchmarks
 (:func:`fir_gym.jax.benchmark.play_in_numpy_env`, the robustness benchmark's learned grid).
 """
@@ -30,10 +33,12 @@ class JaxPolicy:
     ``predict`` does). :meth:`actions` is the feed-forward shortcut; :meth:`episode` a
     one-argument policy for one episode (``fir-gym watch``). :meth:`every_seed` gives one per
     seed sharing one network and one compiled act (``acting``: what an earlier policy of the
-    same result built).
+    same result built). ``rowwise``: a batch's rows acted on one at a time (module
+    docstring): the same actions, bit for bit, whatever batch an observation comes in.
     """
 
-    def __init__(self, result: Any, index: int, acting: Any = None) -> None:
+    def __init__(self, result: Any, index: int, acting: Any = None,
+                 rowwise: bool = False) -> None:
         ts = result.train_state
         if ts is None:
             raise ValueError(f"{result.env_id} {result.kind}: the result has no train state (a "
@@ -45,15 +50,15 @@ class JaxPolicy:
         self.kind = result.kind
         self.actor = jax.tree.map(lambda x: x[index], ts.actor_ts.params)
         self.rms = jax.tree.map(lambda x: x[index], ts.obs_rms_state)
-        self._act, self._carry = _acting(result) if acting is None else acting
+        self._act, self._carry = _acting(result, rowwise) if acting is None else acting
         #: whether the policy carries a state from step to step (the ``recurrent`` kind)
         self.recurrent = self._carry(1) is not None
 
     @classmethod
-    def every_seed(cls, result: Any) -> list[JaxPolicy]:
+    def every_seed(cls, result: Any, rowwise: bool = False) -> list[JaxPolicy]:
         """One policy per seed of ``result``, in its order, the network built and the act
-        compiled once."""
-        acting = _acting(result)
+        compiled once; ``rowwise`` as the class's."""
+        acting = _acting(result, rowwise)
         return [cls(result, i, acting) for i in range(len(result.seeds))]
 
     def __call__(self, obs: Any, episode_start: Any = None, state: Any = None
@@ -92,11 +97,12 @@ class JaxPolicy:
         return act
 
 
-def _acting(result: Any) -> tuple[Any, Any]:
+def _acting(result: Any, rowwise: bool = False) -> tuple[Any, Any]:
     """``(act, carry)`` of ``result``'s network (its env and algorithm rebuilt from the run's
     keywords): the jitted ``(actor params, obs statistics, state, observations, starts) ->
-    (state, actions)`` (:meth:`fir_gym.jax.train.SB3LikePPO.policy_action`) and the state a
-    batch of ``n`` episodes starts from (``None`` for a feed-forward policy)."""
+    (state, actions)`` (:meth:`fir_gym.jax.train.SB3LikePPO.policy_action`) — over the
+    batch, or with ``rowwise`` over each row as a batch of one (``lax.map``) — and the state
+    a batch of ``n`` episodes starts from (``None`` for a feed-forward policy)."""
     from .train import make_algorithm, make_env
 
     env, params = make_env(result.env_id, result.kind, dict(result.env_kwargs),
@@ -107,4 +113,12 @@ def _acting(result: Any) -> tuple[Any, Any]:
         seen = algo.normalize_obs(rms, obs) if algo.normalize_observations else obs
         return algo.policy_action(actor, state, seen, start)
 
-    return jax.jit(act), algo.policy_carry
+    def one_row_at_a_time(actor: Any, rms: Any, state: Any, obs: Any, start: Any) -> Any:
+        def row(inputs: Any) -> Any:
+            carry, x, first = jax.tree.map(lambda leaf: leaf[None], inputs)
+            carry, action = act(actor, rms, carry, x, first)
+            return jax.tree.map(lambda leaf: leaf[0], (carry, action))
+
+        return jax.lax.map(row, (state, obs, start))
+
+    return jax.jit(one_row_at_a_time if rowwise else act), algo.policy_carry

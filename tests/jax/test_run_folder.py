@@ -35,6 +35,8 @@ from fir_gym.jax.benchmark import play_in_numpy_env
 PLANT = {"max_episode_steps": 300}
 #: (kind, its options)
 KINDS = {"true": {}, "efir": {"horizon": 5}, "recurrent": {}}
+#: a kind only the single-env oracle of play_in_numpy_env trains too (its window of 4)
+STACK = {"measurement-stack": {"horizon": 4}}
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +51,8 @@ def runs(cache: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
 
     def get(kind: str) -> tuple[jt.JaxTraining, Path]:
         if kind not in done:
-            result = jt.train(ORBIT, kind, [0, 1], env_kwargs=PLANT, kind_kwargs=KINDS[kind],
+            result = jt.train(ORBIT, kind, [0, 1], env_kwargs=PLANT,
+                              kind_kwargs={**KINDS, **STACK}[kind],
                               cache=cache, **TINY)
             done[kind] = result, jt.save(result, tmp_path_factory.mktemp(f"run-{kind}"))
         return done[kind]
@@ -72,6 +75,77 @@ def true_run(runs: Any) -> tuple[jt.JaxTraining, Path]:
 def played(run: tuple[jt.JaxTraining, Path]) -> list[list[float]]:
     """The in-memory run's policies played in the numpy env: 2 episodes from seed 10 000."""
     return play_in_numpy_env(run[0], 2)
+
+
+def played_one_episode_at_a_time(result: jt.JaxTraining, episodes: int, seed: int
+                                 ) -> list[list[float]]:
+    """The oracle of ``play_in_numpy_env``: every seed's policy in one single env
+    (``make_single_env``, as ``fir-gym evaluate`` and the SB3 benchmark build it), one
+    observation per call, episode ``i`` from ``reset(seed=seed + i)``."""
+    from fir_gym.jax.policy import JaxPolicy
+    from fir_gym.training.vec_env import make_single_env
+
+    plant, options = dict(result.env_kwargs), dict(result.kind_kwargs)
+    env = (make_single_env(ORBIT, observation="true", **plant) if result.kind == "true"
+           else make_single_env(ORBIT, **plant) if result.kind == "recurrent"
+           else make_single_env(ORBIT, observation="measurement-stack",
+                                stack_horizon=options["horizon"], **plant)
+           if result.kind == "measurement-stack"
+           else make_single_env(ORBIT, estimator=result.kind, estimator_kwargs=options, **plant))
+    out = []
+    for policy in JaxPolicy.every_seed(result):
+        returns = []
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            total, done, act = 0.0, False, policy.episode()
+            while not done:
+                obs, reward, terminated, truncated, _ = env.step(act(obs))
+                total, done = total + float(reward), terminated or truncated
+            returns.append(total)
+        out.append(returns)
+    env.close()
+    return out
+
+
+@pytest.mark.parametrize("kind", [*KINDS, *STACK])
+def test_the_numpy_env_returns_are_the_episodes_played_one_at_a_time(runs: Any,
+                                                                     kind: str) -> None:
+    """``play_in_numpy_env`` plays a seed's episodes side by side, one single env each, the
+    policy acting on their batch row by row: the returns equal, bit for bit, the oracle's
+    one env and one observation per call — the LSTM's state carried per episode, the
+    window's option and the estimator's passed on, the envs reused from seed to seed."""
+    result, _ = runs(kind)
+    assert play_in_numpy_env(result, 3, 10_007) == played_one_episode_at_a_time(
+        result, 3, 10_007)
+
+
+@pytest.mark.parametrize("kind", ["efir", "recurrent"])
+def test_rowwise_acts_on_each_row_as_on_that_observation_alone(runs: Any, kind: str) -> None:
+    """``JaxPolicy(rowwise=True)``: a batch's actions (and LSTM states) are each row's alone,
+    bit for bit, whatever the batch; the batched products' agree to float32's round-off."""
+    from fir_gym.jax.policy import JaxPolicy
+
+    result, _ = runs(kind)
+    rowwise = JaxPolicy.every_seed(result, rowwise=True)[1]
+    batched = JaxPolicy.every_seed(result)[1]
+    rng = np.random.default_rng(5)
+    obs = rng.normal(size=(7, result.train_state.obs_rms_state.mean.shape[-1]))
+    start = np.array([True, False, True, True, False, False, True])
+    state = None
+    for _ in range(3):              # the state carried over three steps
+        actions, new_state = rowwise(obs, start, state)
+        alone = [rowwise(obs[i], start[i:i + 1], None if state is None else
+                         jax.tree.map(lambda leaf, i=i: leaf[i:i + 1], state))
+                 for i in range(len(obs))]
+        assert np.array_equal(actions, np.stack([a for a, _ in alone]))
+        if result.kind == "recurrent":
+            for i, (_, carried) in enumerate(alone):
+                for leaf, row in zip(jax.tree.leaves(new_state), jax.tree.leaves(carried),
+                                     strict=True):
+                    assert np.array_equal(np.asarray(leaf)[i:i + 1], np.asarray(row))
+        np.testing.assert_allclose(batched(obs, start, state)[0], actions, rtol=1e-5,
+                                   atol=1e-6)
+        state, obs, start = new_state, obs + 0.1, np.zeros(7, dtype=bool)
 
 
 def policy_leaves(result: jt.JaxTraining) -> list[np.ndarray]:
