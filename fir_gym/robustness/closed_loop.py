@@ -1,12 +1,14 @@
 """Closed-loop episodes under a condition, many at once: the robustness benchmark's evaluator.
 
 :func:`build_env` stacks, on a native vector env of ``n`` sub-envs (next-step autoreset,
-``generators="per_env"``: sub-env ``i`` reset with seed ``s`` plays exactly the episode a
-single env reset with seed ``s + i`` plays), the plant's condition keywords
-(``randomize``, ``burst``), a :class:`~fir_gym.wrappers.VectorSensorFaults` for the
-sensor conditions, and what the controller sees: an estimator
-(:class:`~fir_gym.wrappers.VectorEstimatorObservation`, told a sensor delay), the true
-state, the raw measurement or a window of measurements.
+``generators="per_env"``: sub-env ``i`` reset with seed ``s`` plays the episode a single env
+reset with seed ``s + i`` plays — the same draws; on Orbit-v0, UncertainOscillator-v0 and
+VanDerPol-v0 the returns compared were the same bits too, while the batched arithmetic of
+CarrierMotion-v0 and PendulumSlider-v0 differs from their single env's in the last bits),
+the plant's condition keywords (``randomize``, ``burst``), a
+:class:`~fir_gym.wrappers.VectorSensorFaults` for the sensor conditions, and what the
+controller sees: an estimator (:class:`~fir_gym.wrappers.VectorEstimatorObservation`, told a
+sensor delay), the true state, the raw measurement or a window of measurements.
 
 :func:`play` runs one episode in every sub-env under a policy and records, per episode,
 its return and length, and where the controller sees an estimate: the squared
