@@ -34,7 +34,8 @@ class JaxPolicy:
     one-argument policy for one episode (``fir-gym watch``). :meth:`every_seed` gives one per
     seed sharing one network and one compiled act (``acting``: what an earlier policy of the
     same result built). ``rowwise``: a batch's rows acted on one at a time (module
-    docstring): the same actions, bit for bit, whatever batch an observation comes in.
+    docstring): the same actions, bit for bit, whatever batch an observation comes in (a
+    given ``acting`` keeps the mode it was built with).
     """
 
     def __init__(self, result: Any, index: int, acting: Any = None,
