@@ -31,8 +31,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from fir_gym.robustness.plan import EVAL_SEED
 from fir_gym.tables import format_table
 from fir_gym.training.benchmark import EPISODES, PLANTS, QUICK, SEEDS, chosen_kinds
@@ -200,60 +198,31 @@ def play_in_numpy_env(result: Any, episodes: int, seed: int = EVAL_SEED
     from the SB3 backend's only by the controllers — the same episodes, not merely the same
     distribution.
 
-    A seed's episodes are played side by side, one single env each, and the policy acts on
-    all their observations in one call, each row as a batch of one
+    A seed's episodes are played side by side — the robustness benchmark's
+    :func:`fir_gym.robustness.closed_loop.play` on a ``SyncVectorEnv`` of those single envs
+    (sub-env ``i`` reset with ``seed`` plays episode ``seed + i``) — the policy acting on the
+    batch of their observations in one call, each row as a batch of one
     (:class:`~fir_gym.jax.policy.JaxPolicy`'s ``rowwise``): the returns are, bit for bit,
     those of the episodes played one at a time (``tests/jax/test_run_folder.py``), with a
-    twentieth of the policy's calls. (The plants' vector envs play the same episodes too, but
-    CarrierMotion-v0's and PendulumSlider-v0's batched arithmetic differs from the single
-    env's in the last bits.)"""
+    twentieth of the policy's calls. (The plants' native vector envs play the same episodes
+    too, but CarrierMotion-v0's and PendulumSlider-v0's batched arithmetic differs from the
+    single env's in the last bits.)"""
+    import gymnasium as gym
+
+    from fir_gym.robustness.closed_loop import play
+    from fir_gym.training.kinds import recipe
     from fir_gym.training.vec_env import make_single_env
 
     from .policy import JaxPolicy
 
-    plant, options, kind = dict(result.env_kwargs), dict(result.kind_kwargs), result.kind
-
-    def single_env() -> Any:
-        if kind == "true":
-            return make_single_env(result.env_id, observation="true", **plant)
-        if kind in ("measurement", "recurrent"):
-            return make_single_env(result.env_id, **plant)
-        if kind == "measurement-stack":
-            return make_single_env(result.env_id, observation="measurement-stack",
-                                   stack_horizon=options.get("horizon"), **plant)
-        return make_single_env(result.env_id, estimator=kind, estimator_kwargs=options,
-                               **plant)
-
-    envs = [single_env() for _ in range(episodes)]
+    kwargs = {**recipe(result.kind, result.kind_kwargs).kwargs(), **result.env_kwargs}
+    env = gym.vector.SyncVectorEnv([lambda: make_single_env(result.env_id, **kwargs)
+                                    for _ in range(episodes)])
     try:
-        return [_play_side_by_side(envs, policy, seed)
+        return [play(env, policy, seed).returns.tolist()
                 for policy in JaxPolicy.every_seed(result, rowwise=True)]
     finally:
-        for env in envs:
-            env.close()
-
-
-def _play_side_by_side(envs: list[Any], policy: Any, seed: int) -> list[float]:
-    """One episode in each of ``envs`` (env ``i`` from ``reset(seed=seed + i)``) under
-    ``policy`` (a rowwise :class:`~fir_gym.jax.policy.JaxPolicy`): the raw returns. An env
-    whose episode has ended keeps its last observation in the batch; its row's action is
-    not used."""
-    obs = [env.reset(seed=seed + i)[0] for i, env in enumerate(envs)]
-    totals = [0.0] * len(envs)
-    live = list(range(len(envs)))
-    start = np.ones(len(envs), dtype=bool)
-    state = None
-    while live:
-        actions, state = policy(np.stack(obs), start, state)
-        start = np.zeros(len(envs), dtype=bool)
-        still = []
-        for i in live:
-            obs[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
-            totals[i] += float(reward)
-            if not (terminated or truncated):
-                still.append(i)
-        live = still
-    return totals
+        env.close()
 
 
 def _sb3_tables(source: str | Path) -> dict[str, dict[str, dict[str, Any]]]:
