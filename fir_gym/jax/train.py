@@ -312,22 +312,35 @@ def _segments(iterations: int, checkpoints: int) -> tuple[int, int, int]:
 def training_program(algo: SB3LikePPO, rec: Recipe, *, checkpoints: int, curve_episodes: int,
                      episodes: int, eval_seed: int) -> Any:
     """The function of one seed's initial train state (:func:`initial_states`): ``(final
-    train state, curve returns (k, curve_episodes), final returns (episodes,))``."""
-    k, per, tail = _segments(rec.iterations, checkpoints)
+    train state, curve returns (k, curve_episodes), final returns (episodes,))``.
+
+    The ``rec.iterations`` iterations are one loop, and the curve's evaluation after every
+    ``per``-th of the first ``k · per`` is a ``lax.cond`` on the (unbatched) iteration count
+    inside it (:func:`_segments`), so that the program holds PPO's iteration — its rollout,
+    the env step, the update — once: the checkpoints' scan followed by a loop over the
+    ``tail`` iterations held it twice, which XLA compiled twice (docs/jax.md,
+    "Compilation"). The same iterations and evaluations in the same order: the same bits
+    (``tests/jax/test_train.py``)."""
+    k, per, _ = _segments(rec.iterations, checkpoints)
     curve_keys = jax.random.split(jax.random.PRNGKey(eval_seed), curve_episodes)
     final_keys = jax.random.split(jax.random.PRNGKey(eval_seed), episodes)
 
-    def iterate(ts: Any, n: int) -> Any:
-        return jax.lax.fori_loop(0, n, lambda _, ts: algo.train_iteration(ts), ts)
-
     def one_seed(ts: Any) -> Any:
-        def checkpoint(ts: Any, _: Any) -> Any:
-            ts = iterate(ts, per)
-            return ts, evaluate_policy(algo, ts, curve_keys)
+        returns = jax.eval_shape(lambda ts: evaluate_policy(algo, ts, curve_keys), ts)
+        curve = jnp.zeros((k, *returns.shape), returns.dtype)
 
-        ts, curve = jax.lax.scan(checkpoint, ts, None, k)
-        if tail:
-            ts = iterate(ts, tail)
+        def iteration(i: Any, carry: Any) -> Any:
+            ts, curve = carry
+            ts = algo.train_iteration(ts)
+            checkpoint = ((i + 1) % per == 0) & (i < k * per)
+            curve = jax.lax.cond(
+                checkpoint,
+                lambda: curve.at[(i + 1) // per - 1].set(
+                    evaluate_policy(algo, ts, curve_keys)),
+                lambda: curve)
+            return ts, curve
+
+        ts, curve = jax.lax.fori_loop(0, rec.iterations, iteration, (ts, curve))
         return ts, curve, evaluate_policy(algo, ts, final_keys)
 
     return one_seed

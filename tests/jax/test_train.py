@@ -132,6 +132,57 @@ def test_a_continued_run_is_the_run_trained_straight_bit_for_bit(kind: str, cach
     assert on.settings["checkpoints"] == 4 and on.recipe == straight.recipe
 
 
+@pytest.mark.parametrize("kind", ["measurement", "recurrent"])
+def test_the_program_is_its_iterations_one_call_at_a_time(kind: str, cache: Path) -> None:
+    """The one loop of :func:`fir_gym.jax.train.training_program` (the curve's evaluations
+    a ``lax.cond`` inside it) against the run driven from Python: five iterations, each
+    one call of ``train_iteration``, the curve's episodes evaluated after the second and
+    the fourth (two checkpoints every two iterations, then a tail of one), the final ones
+    after the fifth — every leaf of the state, the curve and the final returns, bit for
+    bit; for the feed-forward and the recurrent PPO, one seed (unbatched) and two
+    (vmapped)."""
+    settings = {"checkpoints": 2, "curve_episodes": 2, "episodes": 3, "eval_seed": 10_000}
+    rec = jt.recipe(ORBIT, steps=5 * 4096, kind=kind)
+    assert rec.iterations == 5 and jt._segments(5, 2) == (2, 2, 1)
+    env, params = jt.make_env(ORBIT, kind)
+    algo = jt.make_algorithm(env, params, rec)
+    curve_keys = jax.random.split(jax.random.PRNGKey(10_000), 2)
+    final_keys = jax.random.split(jax.random.PRNGKey(10_000), 3)
+    program = jax.jit(jt.over_seeds(jt.training_program(algo, rec, **settings)))
+    one = jax.jit(algo.train_iteration)
+    batched = jax.jit(jax.vmap(algo.train_iteration))
+    evaluate = jax.jit(jax.vmap(lambda ts, keys: jt.evaluate_policy(algo, ts, keys),
+                                in_axes=(0, None)))
+
+    def first(tree: Any) -> Any:
+        return jax.tree.map(lambda x: x[0], tree)
+
+    def again(tree: Any) -> Any:
+        return jax.tree.map(lambda x: jnp.asarray(x)[None], tree)
+
+    def step(states: Any) -> Any:
+        return again(one(first(states))) if alone else batched(states)
+
+    def play(states: Any, keys: Any) -> Any:
+        if alone:
+            return again(jt.evaluate_policy(algo, first(states), keys))
+        return evaluate(states, keys)
+
+    for seeds in ([3], [0, 1]):
+        alone = len(seeds) == 1
+        initial = jt.initial_states(algo, seeds)
+        ts, curve, final = program(initial)
+        state, points = initial, []
+        for i in range(5):
+            state = step(state)
+            if i in (1, 3):
+                points.append(play(state, curve_keys))
+        for a, b in zip(jax.tree.leaves(ts), jax.tree.leaves(state), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        np.testing.assert_array_equal(np.asarray(curve), np.stack(points, axis=1))
+        np.testing.assert_array_equal(np.asarray(final), np.asarray(play(state, final_keys)))
+
+
 def test_a_run_without_its_state_is_played_not_continued(two_seeds: jt.JaxTraining,
                                                          tmp_path: Path) -> None:
     out = jt.save(two_seeds, tmp_path / "run")
