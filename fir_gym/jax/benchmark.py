@@ -340,5 +340,28 @@ def markdown(report: dict[str, Any]) -> str:
                           "yes" if r["inside"] else "no"] if "sb3_iqm" in r else ["—", "—"])
             lines.append(line)
         parts.append(f"*{env_id}*\n\n" + format_table(headers, lines, markdown=True))
-    parts.append(f"Whole run: {report['seconds']:.0f} s, compilation included.")
+    parts.append(time_summary(report))
     return "\n\n".join(parts)
+
+
+def time_summary(report: dict[str, Any]) -> str:
+    """Where the run's time went, from its rows: the learned rows' compilation (or loading
+    from the cache) and training summed, and the least wall time any schedule of them on
+    the run's worker processes could take — the bound docs/jax.md ("The ceiling on this
+    CPU") reads off the five-plant runs; the rest of the workers' time went to the
+    evaluations in the numpy env, the LQG rows, starting the workers and waiting at the
+    end."""
+    rows = [r for table in report["tables"].values() for r in table if r["iqm"] is not None]
+    compiling = sum(r["compile_seconds"] for r in rows)
+    training = sum(r["train_seconds"] for r in rows)
+    jobs = report.get("jobs") or 1
+    seconds = report["seconds"]
+    where = "in one process" if jobs == 1 else f"on {jobs} worker processes"
+    rest = max(seconds * jobs - compiling - training, 0.0)
+    of = "" if jobs == 1 else f" of the {seconds * jobs:.0f} worker-seconds"
+    learned = f"{len(rows)} learned row" + ("" if len(rows) == 1 else "s")
+    return (f"Whole run: {seconds:.0f} s {where}, compilation included. Its {learned} "
+            f"compiled (or loaded from the cache) for {compiling:.0f} s and "
+            f"trained for {training:.0f} s in all: no schedule {where} does that in less "
+            f"than {(compiling + training) / jobs:.0f} s. The other {rest:.0f} s{of} went "
+            "to the evaluations in the numpy env, the LQG rows, starting and waiting.")

@@ -66,6 +66,11 @@ def test_a_quick_run_writes_rows_beside_the_sb3_ones(tmp_path: Path) -> None:
         iqm([sum(e) / len(e) for e in row["numpy_returns"]]))
     text = (tmp_path / "jax" / "BENCHMARK.md").read_text()
     assert "fir_gym/Orbit-v0" in text and "inside" in text and "yes" in text
+    busy = row["compile_seconds"] + row["train_seconds"]            # one row, one process
+    assert (f"Its 1 learned row compiled (or loaded from the cache) for "
+            f"{row['compile_seconds']:.0f} s and trained for {row['train_seconds']:.0f} s in "
+            f"all: no schedule in one process does that in less than {busy:.0f} s. The other "
+            f"{report['seconds'] - busy:.0f} s went") in text
     assert (tmp_path / "jax" / "Orbit-v0" / "true" / "results.json").is_file()
     with pytest.raises(ValueError, match="compare-with"):
         benchmark.run_benchmark(tmp_path / "x", compare_with=tmp_path / "nothing",
@@ -90,6 +95,12 @@ def test_rows_on_two_worker_processes_are_the_rows_of_one(tmp_path: Path) -> Non
         assert a["numpy_returns"] == b["numpy_returns"]
         assert a["episode_returns"] == b["episode_returns"]
     assert (tmp_path / "2" / "Orbit-v0" / "recurrent" / "results.json").is_file()
+    busy = sum(r["compile_seconds"] + r["train_seconds"] for r in rows_two)
+    assert ("on 2 worker processes, compilation included. Its 2 learned rows compiled"
+            in (tmp_path / "2" / "BENCHMARK.md").read_text())
+    assert (f"does that in less than {busy / 2:.0f} s. The other "
+            f"{two['seconds'] * 2 - busy:.0f} s of the {two['seconds'] * 2:.0f} worker-seconds"
+            in (tmp_path / "2" / "BENCHMARK.md").read_text())
 
 
 def test_the_lqg_row_is_the_sb3_benchmarks_evaluation(tmp_path: Path) -> None:
