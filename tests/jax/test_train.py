@@ -149,38 +149,23 @@ def test_the_program_is_its_iterations_one_call_at_a_time(kind: str, cache: Path
     curve_keys = jax.random.split(jax.random.PRNGKey(10_000), 2)
     final_keys = jax.random.split(jax.random.PRNGKey(10_000), 3)
     program = jax.jit(jt.over_seeds(jt.training_program(algo, rec, **settings)))
-    one = jax.jit(algo.train_iteration)
-    batched = jax.jit(jax.vmap(algo.train_iteration))
-    evaluate = jax.jit(jax.vmap(lambda ts, keys: jt.evaluate_policy(algo, ts, keys),
-                                in_axes=(0, None)))
-
-    def first(tree: Any) -> Any:
-        return jax.tree.map(lambda x: x[0], tree)
-
-    def again(tree: Any) -> Any:
-        return jax.tree.map(lambda x: jnp.asarray(x)[None], tree)
-
-    def step(states: Any) -> Any:
-        return again(one(first(states))) if alone else batched(states)
-
-    def play(states: Any, keys: Any) -> Any:
-        if alone:
-            return again(jt.evaluate_policy(algo, first(states), keys))
-        return evaluate(states, keys)
-
+    # the oracle's pieces over the seeds as the program's are (unbatched for one seed)
+    step = jax.jit(jt.over_seeds(algo.train_iteration))
+    play_curve, play_final = (
+        jax.jit(jt.over_seeds(lambda ts, keys=keys: jt.evaluate_policy(algo, ts, keys)))
+        for keys in (curve_keys, final_keys))
     for seeds in ([3], [0, 1]):
-        alone = len(seeds) == 1
         initial = jt.initial_states(algo, seeds)
         ts, curve, final = program(initial)
         state, points = initial, []
         for i in range(5):
             state = step(state)
             if i in (1, 3):
-                points.append(play(state, curve_keys))
+                points.append(play_curve(state))
         for a, b in zip(jax.tree.leaves(ts), jax.tree.leaves(state), strict=True):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
         np.testing.assert_array_equal(np.asarray(curve), np.stack(points, axis=1))
-        np.testing.assert_array_equal(np.asarray(final), np.asarray(play(state, final_keys)))
+        np.testing.assert_array_equal(np.asarray(final), np.asarray(play_final(state)))
 
 
 def test_a_run_without_its_state_is_played_not_continued(two_seeds: jt.JaxTraining,
